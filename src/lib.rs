@@ -1,0 +1,28 @@
+//! The `crossroads` command line: one binary with a subcommand per role, so
+//! one container image serves every role.
+//!
+//! [`cli::Cli`] is the clap definition; [`run`] loads the layered
+//! configuration ([`crossroads_common::ConfigLoader`]), starts tracing and
+//! dispatches to the subcommand's module under [`commands`].
+
+pub mod cli;
+pub mod commands;
+
+use std::process::ExitCode;
+
+use anyhow::Context;
+use cli::{Cli, Command};
+
+/// Runs one parsed command line to completion.
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    let config = cli
+        .global
+        .loader()
+        .load()
+        .context("loading configuration")?;
+    crossroads_common::telemetry::init_tracing(config.telemetry.log_format)?;
+    match cli.command {
+        Command::Config(args) => commands::config::run(&cli.global, &config, &args),
+        Command::Doctor(args) => commands::doctor::run(&config, &args),
+    }
+}
