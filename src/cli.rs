@@ -23,7 +23,13 @@ pub struct GlobalArgs {
     /// TOML configuration file (one file describes a whole run; every role
     /// reads it). Environment variables CROSSROADS_<SECTION>__<KEY> override
     /// it, and --set overrides both.
-    #[arg(long, short = 'c', global = true, env = "CROSSROADS_CONFIG", value_name = "FILE")]
+    #[arg(
+        long,
+        short = 'c',
+        global = true,
+        env = "CROSSROADS_CONFIG",
+        value_name = "FILE"
+    )]
     pub config: Option<PathBuf>,
 
     /// Override one configuration key, e.g. --set runtime.worker_threads=4.

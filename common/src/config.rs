@@ -262,9 +262,9 @@ impl ConfigLoader {
             });
         }
 
-        let config: Config = figment
-            .extract()
-            .map_err(|e| ConfigError::Invalid(e.into_iter().map(|e| problem_of(&figment, e)).collect()))?;
+        let config: Config = figment.extract().map_err(|e| {
+            ConfigError::Invalid(e.into_iter().map(|e| problem_of(&figment, e)).collect())
+        })?;
         let problems: Vec<_> = config
             .validate()
             .into_iter()
@@ -301,14 +301,10 @@ impl<P: Provider> Provider for Named<P> {
 
 fn problem_of(figment: &Figment, e: figment::Error) -> ConfigProblem {
     use figment::error::Kind;
-    let mut key = e.path.join(".");
+    // For an unknown field the path already ends with the field's name.
+    let key = e.path.join(".");
     let problem = match &e.kind {
-        Kind::UnknownField(field, expected) => {
-            key = if key.is_empty() {
-                field.clone()
-            } else {
-                format!("{key}.{field}")
-            };
+        Kind::UnknownField(_, expected) => {
             format!("unknown key; expected one of: {}", expected.join(", "))
         }
         kind => kind.to_string(),

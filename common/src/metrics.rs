@@ -160,11 +160,7 @@ async fn serve(listener: TcpListener, registry: Registry, shutdown: Shutdown) {
 
 fn respond(req: &Request<Incoming>, registry: &Registry) -> Response<Full<Bytes>> {
     let (status, content_type, body) = match (req.method(), req.uri().path()) {
-        (&Method::GET, "/metrics") => (
-            StatusCode::OK,
-            prometheus::TEXT_FORMAT,
-            render(registry),
-        ),
+        (&Method::GET, "/metrics") => (StatusCode::OK, prometheus::TEXT_FORMAT, render(registry)),
         (&Method::GET, "/") => (
             StatusCode::OK,
             "text/plain; charset=utf-8",

@@ -1,8 +1,8 @@
 //! The shutdown signal: servers and loops take a [`Shutdown`] as an input
 //! and stop when it fires, whether from SIGINT, SIGTERM or a test.
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use tokio_util::sync::CancellationToken;
 

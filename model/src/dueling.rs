@@ -53,16 +53,16 @@ impl DuelingMlp {
         let mut trunk = Vec::with_capacity(spec.hidden.len());
         let mut width = spec.input;
         for (i, &h) in spec.hidden.iter().enumerate() {
-            trunk.push(nn::linear(
-                path / "trunk" / i,
-                width,
-                h,
-                Default::default(),
-            ));
+            trunk.push(nn::linear(path / "trunk" / i, width, h, Default::default()));
             width = h;
         }
         let value = nn::linear(path / "value", width, 1, Default::default());
-        let advantage = nn::linear(path / "advantage", width, spec.num_actions, Default::default());
+        let advantage = nn::linear(
+            path / "advantage",
+            width,
+            spec.num_actions,
+            Default::default(),
+        );
         Ok(Self {
             spec,
             trunk,

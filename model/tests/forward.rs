@@ -31,7 +31,12 @@ fn dueling_forward_matches_hand_computation() {
     set(&vs, "value.weight", &[0.5, -1.0], &[1, 2]);
     set(&vs, "value.bias", &[1.0], &[1]);
     // advantage: A = [[1, 0], [0, 1], [1, 1]] h + [0, 0, -3]
-    set(&vs, "advantage.weight", &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0], &[3, 2]);
+    set(
+        &vs,
+        "advantage.weight",
+        &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+        &[3, 2],
+    );
     set(&vs, "advantage.bias", &[0.0, 0.0, -3.0], &[3]);
 
     // x = [1, 1]:  h = relu([3, 0.5]) = [3, 0.5]; V = 1.5 - 0.5 + 1 = 2

@@ -1,0 +1,5 @@
+//! Integration tests of crossroads-common, one binary.
+
+mod config;
+mod metrics;
+mod shutdown;

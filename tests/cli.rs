@@ -1,0 +1,145 @@
+//! The `crossroads` binary as a user runs it.
+
+use std::process::{Command, Output};
+
+use clap::CommandFactory;
+use crossroads::cli::Cli;
+
+fn crossroads(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(args)
+        .env_remove("CROSSROADS_CONFIG")
+        .env_remove("RUST_LOG")
+        .output()
+        .expect("run crossroads")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn clap_definition_is_consistent() {
+    Cli::command().debug_assert();
+}
+
+#[test]
+fn help_describes_the_program_and_every_subcommand() {
+    let out = crossroads(&["--help"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let help = stdout(&out);
+    assert!(help.contains("intersections"), "{help}");
+    let cli = Cli::command();
+    let subcommands: Vec<_> = cli.get_subcommands().collect();
+    assert!(!subcommands.is_empty());
+    for sub in subcommands {
+        let name = sub.get_name();
+        let about = sub
+            .get_about()
+            .map(ToString::to_string)
+            .unwrap_or_else(|| panic!("subcommand {name} has no description"));
+        assert!(help.contains(name), "{name} missing from --help:\n{help}");
+
+        let out = crossroads(&[name, "--help"]);
+        assert!(out.status.success(), "{name} --help: {}", stderr(&out));
+        let sub_help = stdout(&out);
+        assert!(
+            sub_help.contains(&about),
+            "{name} --help lacks {about:?}:\n{sub_help}"
+        );
+        for nested in sub.get_subcommands() {
+            let nested_name = nested.get_name();
+            let out = crossroads(&[name, nested_name, "--help"]);
+            assert!(out.status.success(), "{name} {nested_name} --help");
+            let nested_about = nested
+                .get_about()
+                .map(ToString::to_string)
+                .unwrap_or_else(|| panic!("{name} {nested_name} has no description"));
+            let first_line = nested_about.lines().next().unwrap_or_default().to_owned();
+            assert!(
+                stdout(&out).contains(&first_line),
+                "{name} {nested_name} --help"
+            );
+        }
+    }
+}
+
+#[test]
+fn config_show_prints_toml_with_layers_applied() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("run.toml");
+    std::fs::write(
+        &file,
+        "[runtime]\nworker_threads = 5\ncompute_threads = 1\n",
+    )
+    .expect("write");
+    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["--config", file.to_str().expect("utf-8 path")])
+        .args(["--set", "runtime.compute_threads=3", "config", "show"])
+        .env("CROSSROADS_TELEMETRY__LOG_FORMAT", "json")
+        .output()
+        .expect("run");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let shown: toml::Value = toml::from_str(&stdout(&out)).expect("stdout is TOML");
+    assert_eq!(
+        shown["runtime"]["worker_threads"].as_integer(),
+        Some(5),
+        "from the file"
+    );
+    assert_eq!(
+        shown["runtime"]["compute_threads"].as_integer(),
+        Some(3),
+        "--set wins"
+    );
+    assert_eq!(
+        shown["telemetry"]["log_format"].as_str(),
+        Some("json"),
+        "from the environment"
+    );
+}
+
+#[test]
+fn bad_config_fails_with_an_error_naming_the_key() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("bad.toml");
+    std::fs::write(&file, "[runtime]\nworker_threads = 0\n").expect("write");
+    let out = crossroads(&[
+        "--config",
+        file.to_str().expect("utf-8 path"),
+        "config",
+        "check",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("runtime.worker_threads"), "{err}");
+    assert!(err.contains("bad.toml"), "{err}");
+
+    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["config", "check"])
+        .env("CROSSROADS_RUNTIME__WORKER_THREADS", "lots")
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("CROSSROADS_RUNTIME__WORKER_THREADS"), "{err}");
+}
+
+#[test]
+fn doctor_reports_a_real_forward_pass() {
+    let out = crossroads(&["doctor", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&out)).expect("JSON");
+    assert!(report["cores"].as_u64().is_some_and(|c| c >= 1), "{report}");
+    assert!(
+        report["torch_threads"].as_i64().is_some_and(|t| t >= 1),
+        "{report}"
+    );
+    let ms = report["forward_batch64_median_ms"]
+        .as_f64()
+        .expect("timing");
+    assert!(ms > 0.0 && ms.is_finite(), "{report}");
+}
