@@ -17,7 +17,8 @@ set -euo pipefail
 
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 dest="${1:-$repo/.libtorch}"
-sums="$repo/scripts/libtorch-wheels.sha256"
+# CROSSROADS_LIBTORCH_SUMS replaces the recorded sums (used by the tests).
+sums="${CROSSROADS_LIBTORCH_SUMS:-$repo/scripts/libtorch-wheels.sha256}"
 cache="${CROSSROADS_WHEEL_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/crossroads/wheels}"
 version="2.13.0"
 stamp="$dest/.crossroads-complete"

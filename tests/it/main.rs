@@ -1,0 +1,5 @@
+//! End-to-end tests of the `crossroads` binary and the repository's scripts,
+//! one test binary.
+
+mod cli;
+mod setup_libtorch;
