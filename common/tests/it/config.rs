@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use crossroads_common::{ConfigError, ConfigLoader, LogFormat};
+use crossroads_common::{Config, ConfigError, ConfigLoader, LogFormat};
 
 fn toml_file(content: &str) -> tempfile::NamedTempFile {
     let mut f = tempfile::Builder::new()
@@ -11,6 +11,16 @@ fn toml_file(content: &str) -> tempfile::NamedTempFile {
         .expect("temp file");
     f.write_all(content.as_bytes()).expect("write");
     f
+}
+
+/// Loads `content` as the config file, without the environment.
+fn load(content: &str) -> (tempfile::NamedTempFile, Result<Config, ConfigError>) {
+    let f = toml_file(content);
+    let result = ConfigLoader::new()
+        .without_env()
+        .file(Some(f.path()))
+        .load();
+    (f, result)
 }
 
 fn problems(err: ConfigError) -> Vec<(String, String, String)> {
@@ -30,12 +40,8 @@ fn defaults_load_and_validate() {
 
 #[test]
 fn file_values_override_defaults() {
-    let f = toml_file("[runtime]\nworker_threads = 6\n[telemetry]\nlog_format = \"json\"\n");
-    let config = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect("valid file");
+    let (_f, result) = load("[runtime]\nworker_threads = 6\n[telemetry]\nlog_format = \"json\"\n");
+    let config = result.expect("valid file");
     assert_eq!(config.runtime.worker_threads, 6);
     assert_eq!(config.runtime.compute_threads, 0, "untouched default");
     assert_eq!(config.telemetry.log_format, LogFormat::Json);
@@ -43,12 +49,8 @@ fn file_values_override_defaults() {
 
 #[test]
 fn unknown_key_names_file_and_key() {
-    let f = toml_file("[runtime]\nworker_thread = 3\n");
-    let err = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect_err("unknown key");
+    let (f, result) = load("[runtime]\nworker_thread = 3\n");
+    let err = result.expect_err("unknown key");
     let p = problems(err);
     assert_eq!(p.len(), 1, "{p:?}");
     let (origin, key, problem) = &p[0];
@@ -63,24 +65,16 @@ fn unknown_key_names_file_and_key() {
 
 #[test]
 fn unknown_section_names_the_section() {
-    let f = toml_file("[learnr]\nbatch_size = 3\n");
-    let err = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect_err("unknown section");
+    let (_f, result) = load("[learnr]\nbatch_size = 3\n");
+    let err = result.expect_err("unknown section");
     let p = problems(err);
     assert_eq!(p[0].1, "learnr", "{p:?}");
 }
 
 #[test]
 fn wrong_type_names_file_and_key() {
-    let f = toml_file("[runtime]\nworker_threads = \"many\"\n");
-    let err = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect_err("wrong type");
+    let (_f, result) = load("[runtime]\nworker_threads = \"many\"\n");
+    let err = result.expect_err("wrong type");
     let message = err.to_string();
     let p = problems(err);
     assert_eq!(p[0].1, "runtime.worker_threads", "{p:?}");
@@ -91,12 +85,8 @@ fn wrong_type_names_file_and_key() {
 
 #[test]
 fn out_of_range_value_names_file_key_and_range() {
-    let f = toml_file("[runtime]\nworker_threads = 0\n");
-    let err = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect_err("out of range");
+    let (f, result) = load("[runtime]\nworker_threads = 0\n");
+    let err = result.expect_err("out of range");
     let p = problems(err);
     assert_eq!(p.len(), 1, "{p:?}");
     assert_eq!(p[0].1, "runtime.worker_threads");
@@ -106,12 +96,8 @@ fn out_of_range_value_names_file_key_and_range() {
 
 #[test]
 fn enum_value_outside_the_choices_is_named() {
-    let f = toml_file("[telemetry]\nlog_format = \"xml\"\n");
-    let err = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect_err("bad enum");
+    let (_f, result) = load("[telemetry]\nlog_format = \"xml\"\n");
+    let err = result.expect_err("bad enum");
     let p = problems(err);
     assert_eq!(p[0].1, "telemetry.log_format", "{p:?}");
     assert!(p[0].2.contains("xml"), "{p:?}");
@@ -161,12 +147,8 @@ fn missing_file_is_an_error_naming_it() {
 
 #[test]
 fn malformed_toml_is_an_error_naming_the_file() {
-    let f = toml_file("[runtime\nworker_threads = 2\n");
-    let err = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect_err("syntax error");
+    let (f, result) = load("[runtime\nworker_threads = 2\n");
+    let err = result.expect_err("syntax error");
     assert!(
         err.to_string().contains(&f.path().display().to_string()),
         "{err}"
@@ -180,11 +162,7 @@ fn rendered_config_loads_back_identically() {
         .sets(["runtime.compute_threads=3", "telemetry.metrics=false"])
         .load()
         .expect("valid");
-    let f = toml_file(&config.to_toml());
-    let back = ConfigLoader::new()
-        .without_env()
-        .file(Some(f.path()))
-        .load()
-        .expect("round trip");
+    let (_f, result) = load(&config.to_toml());
+    let back = result.expect("round trip");
     assert_eq!(config, back);
 }
