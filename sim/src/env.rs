@@ -267,11 +267,12 @@ impl Env {
 
     /// What each lane knows about the ego before this step.
     fn update_foes(&mut self, dt: f64) {
-        let sc = &self.scenario;
+        let sc = Arc::clone(&self.scenario);
         let tp = &sc.spec().traffic;
         let ep = &sc.spec().ego.params;
         let ego = self.ego;
-        // Where the ego would stand if it braked now.
+        // Where the ego would stand if it braked now: drivers react once it
+        // can no longer stop short of their lane, or has committed.
         let stop_s = ego.s + ego.v * ego.v / (2.0 * ep.decel);
         for (i, lane) in sc.lanes().iter().enumerate() {
             let mut foe = EgoFoe::None;
@@ -286,9 +287,7 @@ impl Env {
                     foe = EgoFoe::Occupying { rear, v };
                     self.foe_time[i] = tp.reaction_delay_s;
                 } else if ego.s < z.ego_in && (ego.committed || stop_s >= z.ego_in) {
-                    let d = z.ego_in - ego.s;
-                    let a = if ego.committed { ep.accel } else { 0.0 };
-                    let t_enter = time_to_cover(d, ego.v, a);
+                    let t_enter = self.ego_arrival(z.ego_in, tp.yield_horizon_s);
                     if t_enter <= tp.yield_horizon_s {
                         self.foe_time[i] += dt;
                         if self.foe_time[i] >= tp.reaction_delay_s {
@@ -303,6 +302,33 @@ impl Env {
             }
             self.foes[i] = foe;
         }
+    }
+
+    /// Seconds until the ego's front reaches arc length `target`, as a
+    /// driver would predict it: full acceleration along the curve speed
+    /// limits once committed, constant speed otherwise. Infinite beyond
+    /// `horizon`.
+    fn ego_arrival(&self, target: f64, horizon: f64) -> f64 {
+        let ego = self.ego;
+        if target <= ego.s {
+            return 0.0;
+        }
+        if !ego.committed {
+            return if ego.v > 0.05 { (target - ego.s) / ego.v } else { f64::INFINITY };
+        }
+        let sc = &self.scenario;
+        let (dt, a) = (sc.dt(), sc.spec().ego.params.accel);
+        let (mut s, mut v, mut t) = (ego.s, ego.v, 0.0);
+        while t <= horizon {
+            v = (v + a * dt).min(sc.ego_speed_cap(s));
+            let next = s + v * dt;
+            if next >= target {
+                return t + (target - s) / v.max(1e-6);
+            }
+            s = next;
+            t += dt;
+        }
+        f64::INFINITY
     }
 
     fn collides(&self) -> bool {

@@ -2,16 +2,21 @@
 //! (Placeholder docs; completed below.)
 
 mod action;
+mod bench;
 mod car_following;
 mod env;
 mod error;
+mod eval;
 mod geometry;
 mod observation;
 mod occlusion;
 mod params;
 mod path;
+mod policy;
 mod scenario;
+mod seed;
 mod traffic;
+mod tune;
 
 pub use action::{ActionSet, Control, DURATIONS, Intent};
 pub use car_following::{dawdle, idm_accel, krauss_safe_speed};
@@ -24,3 +29,8 @@ pub use params::{EgoParams, Rewards, TrafficParams};
 pub use path::{Path, PathSpec, PieceSpec};
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use traffic::{Car, EgoFoe, Traffic};
+pub use bench::{BenchFigures, bench_builtin, bench_scenario};
+pub use eval::{EvalConfig, EvalReport, Interval, TrialResult, evaluate, run_trials, summarize, wilson};
+pub use policy::{Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy};
+pub use seed::{episode_seed, policy_seed, splitmix64};
+pub use tune::{SweepPoint, TuneReport, default_thresholds, tune_ttc};

@@ -38,6 +38,11 @@ pub struct TrafficParams {
     /// A car starts yielding to an ego that is moving towards its lane when
     /// the ego would reach the lane within this many seconds.
     pub yield_horizon_s: f64,
+    /// Hardest braking a driver accepts to yield to an ego that is pulling
+    /// out; a driver who would need more drives on, taking the right of
+    /// way (SUMO's junction model does the same). An ego already in the
+    /// lane ahead is braked for with `emergency_decel`. m/s².
+    pub yield_decel: f64,
     /// A car that would clear the ego's path at least this many seconds
     /// before the ego arrives does not yield.
     pub yield_margin_s: f64,
@@ -69,10 +74,11 @@ impl Default for TrafficParams {
             speed_factor_dev: 0.1,
             speed_factor_min: 0.2,
             speed_factor_max: 2.0,
-            yield_horizon_s: 3.0,
+            yield_horizon_s: 6.0,
+            yield_decel: 9.0,
             yield_margin_s: 0.5,
             reaction_delay_s: 0.0,
-            brake_threshold: 1.0,
+            brake_threshold: 2.0,
             max_pending: 4,
         }
     }

@@ -130,6 +130,10 @@ pub struct ConflictZone {
     pub lane_out: f64,
     /// The ego ends its route in this lane (it merges rather than crosses).
     pub merge: bool,
+    /// For a merge, the largest lane coordinate the ego covers during its
+    /// first car length in the lane: a car whose rear is past it is ahead
+    /// of the merging ego.
+    pub lane_merge_clear: f64,
 }
 
 impl ConflictZone {
@@ -137,7 +141,7 @@ impl ConflictZone {
     /// threat: the far edge of a crossing, the entry point of a merge (once
     /// past it, the car drives away ahead of the ego).
     pub fn lane_clear(&self) -> f64 {
-        if self.merge { self.lane_in } else { self.lane_out }
+        if self.merge { self.lane_merge_clear } else { self.lane_out }
     }
 }
 
@@ -353,6 +357,7 @@ pub(crate) fn ego_rect(path: &Path, params: &EgoParams, s: f64) -> OrientedRect 
 }
 
 fn conflict_zone(ego_path: &Path, ego: &EgoSpec, lane: &Path, traffic_width: f64) -> Option<ConflictZone> {
+    let entry_len = ego.params.length;
     // A small margin so grazing contacts also count as conflicts.
     let half_band = 0.5 * traffic_width + 0.1;
     let mut zone: Option<ConflictZone> = None;
@@ -377,8 +382,12 @@ fn conflict_zone(ego_path: &Path, ego: &EgoSpec, lane: &Path, traffic_width: f64
                 lane_in: lo_l,
                 lane_out: hi_l,
                 merge: false,
+                lane_merge_clear: hi_l,
             });
             z.ego_out = s;
+            if s <= z.ego_in + entry_len {
+                z.lane_merge_clear = z.lane_merge_clear.max(hi_l);
+            }
             z.lane_in = z.lane_in.min(lo_l);
             z.lane_out = z.lane_out.max(hi_l);
         }

@@ -32,6 +32,9 @@ pub struct Car {
     pub v_desired: f64,
     /// Whether it braked harder than the braking threshold this step.
     pub braking: bool,
+    /// Whether it has decided to give way to the ego pulling out; kept
+    /// until the ego is in its lane or gone, so drivers do not dither.
+    pub yielding: bool,
     /// Centre of the car in the world.
     pub pos: Vec2,
     /// Unit vector of its heading.
@@ -167,15 +170,21 @@ impl Traffic {
                         a = a.min(idm_accel(car.v, car.v_desired, rear - car.s, v, p));
                     }
                     EgoFoe::Entering { lane_in, lane_clear, t_enter } if car.s < lane_in => {
-                        let t_clear = if car.v > 0.1 {
-                            (lane_clear + len - car.s) / car.v
-                        } else {
-                            f64::INFINITY
-                        };
-                        if t_clear + p.yield_margin_s > t_enter {
+                        if !car.yielding {
+                            let t_clear = if car.v > 0.1 {
+                                (lane_clear + len - car.s) / car.v
+                            } else {
+                                f64::INFINITY
+                            };
+                            let room = lane_in - car.s - HARD_GAP;
+                            let needed = if room > 0.0 { car.v * car.v / (2.0 * room) } else { f64::INFINITY };
+                            car.yielding = t_clear + p.yield_margin_s > t_enter && needed <= p.yield_decel;
+                        }
+                        if car.yielding {
                             a = a.min(idm_accel(car.v, car.v_desired, lane_in - car.s, 0.0, p));
                         }
                     }
+                    EgoFoe::None => car.yielding = false,
                     _ => {}
                 }
                 let floor = (car.v - p.emergency_decel * dt).max(0.0);
@@ -228,6 +237,7 @@ impl Traffic {
             v,
             v_desired: v.max(0.1),
             braking: false,
+            yielding: false,
             pos: Vec2::default(),
             axis: Vec2::default(),
             heading: 0.0,
@@ -267,6 +277,7 @@ impl Traffic {
             v,
             v_desired,
             braking: false,
+            yielding: false,
             pos: Vec2::default(),
             axis: Vec2::default(),
             heading: 0.0,
@@ -328,6 +339,7 @@ mod tests {
             v: 20.0,
             v_desired: 20.0,
             braking: false,
+            yielding: false,
             pos: Vec2::default(),
             axis: Vec2::default(),
             heading: 0.0,
@@ -361,6 +373,7 @@ mod tests {
             v: 20.0,
             v_desired: 20.0,
             braking: false,
+            yielding: false,
             pos: Vec2::default(),
             axis: Vec2::default(),
             heading: 0.0,
