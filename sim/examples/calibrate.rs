@@ -14,9 +14,23 @@ fn main() -> Result<(), SimError> {
     if names.is_empty() {
         names = ["right", "left", "left2", "forward", "challenge"].map(String::from).to_vec();
     }
-    let thresholds: Vec<f64> = (0..=24).map(|i| f64::from(i) * 0.25).collect();
+    let thresholds: Vec<f64> = (0..=12).map(|i| f64::from(i) * 0.25).collect();
     for name in &names {
-        let sc = Arc::new(Scenario::load(name)?);
+        let mut spec = Scenario::load(name)?.spec().clone();
+        let env_f = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+        if let Some(v) = env_f("YIELD_DECEL") {
+            spec.traffic.yield_decel = v;
+        }
+        if let Some(v) = env_f("REACTION") {
+            spec.traffic.reaction_delay_s = v;
+        }
+        if let Some(v) = env_f("EGO_ACCEL") {
+            spec.ego.params.accel = v;
+        }
+        if let Some(v) = env_f("HORIZON") {
+            spec.traffic.yield_horizon_s = v;
+        }
+        let sc = Arc::new(Scenario::compile(spec)?);
         let creep = sc.spec().occlusion.is_some();
         let set = if creep { ActionSet::Creep } else { ActionSet::Ttg };
         let t0 = std::time::Instant::now();
@@ -34,15 +48,17 @@ fn main() -> Result<(), SimError> {
             );
         }
         println!("  best: {:?}", tune.best);
+        for set in [set, ActionSet::Sequential] {
         let r = evaluate(&sc, &RandomPolicy, &EvalConfig::new(set, trials, 7), &|_| {})?;
         println!(
-            "  random: succ {:.2} coll {:.2} tout {:.2} time {:?} brake {:.2}",
+            "  random {set}: succ {:.2} coll {:.2} tout {:.2} time {:?} brake {:.2}",
             100.0 * r.success_rate,
             100.0 * r.collision_rate,
             100.0 * r.timeout_rate,
             r.mean_time_s,
             r.mean_brake_s
         );
+        }
     }
     Ok(())
 }

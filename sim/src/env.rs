@@ -201,6 +201,10 @@ impl Env {
     fn sim_step(&mut self, control: Control) -> f64 {
         let sc = Arc::clone(&self.scenario);
         let dt = sc.dt();
+        // Drivers see a go at once, not a step later.
+        if control == Control::Go {
+            self.ego.committed = true;
+        }
         self.update_foes(dt);
         self.move_ego(control, dt);
         self.traffic.step(&sc, &self.foes, &mut self.rng);
@@ -272,7 +276,8 @@ impl Env {
         let ep = &sc.spec().ego.params;
         let ego = self.ego;
         // Where the ego would stand if it braked now: drivers react once it
-        // can no longer stop short of their lane, or has committed.
+        // can no longer stop short of their lane, has committed, or is
+        // driving at their lane faster than a creep.
         let stop_s = ego.s + ego.v * ego.v / (2.0 * ep.decel);
         for (i, lane) in sc.lanes().iter().enumerate() {
             let mut foe = EgoFoe::None;
@@ -286,9 +291,14 @@ impl Env {
                     let v = (ego.v * (self.ego_rect.axis.y.atan2(self.ego_rect.axis.x) - lane_dir).cos()).max(0.0);
                     foe = EgoFoe::Occupying { rear, v };
                     self.foe_time[i] = tp.reaction_delay_s;
-                } else if ego.s < z.ego_in && (ego.committed || stop_s >= z.ego_in) {
+                } else if ego.s < z.ego_in
+                    && (ego.committed || stop_s >= z.ego_in || ego.v > ep.creep_speed + 0.5)
+                {
                     let t_enter = self.ego_arrival(z.ego_in, tp.yield_horizon_s);
-                    if t_enter <= tp.yield_horizon_s {
+                    // An ego that is neither committed nor unable to stop is
+                    // taken as entering only when it is close to doing so.
+                    let near = ego.committed || stop_s >= z.ego_in || t_enter <= 2.0;
+                    if near && t_enter <= tp.yield_horizon_s {
                         self.foe_time[i] += dt;
                         if self.foe_time[i] >= tp.reaction_delay_s {
                             foe = EgoFoe::Entering { lane_in: z.lane_in, lane_clear: z.lane_clear(), t_enter };
@@ -376,6 +386,11 @@ impl Env {
     /// Traffic.
     pub fn traffic(&self) -> &Traffic {
         &self.traffic
+    }
+
+    /// What each lane's drivers knew about the ego during the last step.
+    pub fn foes(&self) -> &[EgoFoe] {
+        &self.foes
     }
 
     /// This episode's occluders.

@@ -75,10 +75,10 @@ impl Default for TrafficParams {
             speed_factor_min: 0.2,
             speed_factor_max: 2.0,
             yield_horizon_s: 6.0,
-            yield_decel: 9.0,
+            yield_decel: 7.5,
             yield_margin_s: 0.5,
             reaction_delay_s: 0.0,
-            brake_threshold: 2.0,
+            brake_threshold: 1.0,
             max_pending: 4,
         }
     }
@@ -92,7 +92,8 @@ pub struct EgoParams {
     pub length: f64,
     /// Width, m.
     pub width: f64,
-    /// Acceleration of *go* and *accelerate*, m/s².
+    /// Acceleration of *go* and *accelerate*, m/s². SUMO's default, as the
+    /// ego is a car of the same type as traffic.
     pub accel: f64,
     /// Deceleration of *decelerate* and of stopping to wait, m/s².
     pub decel: f64,
@@ -109,7 +110,7 @@ impl Default for EgoParams {
         Self {
             length: 5.0,
             width: 1.8,
-            accel: 2.0,
+            accel: 2.6,
             decel: 4.5,
             max_speed: 15.0,
             lateral_accel: 3.0,

@@ -262,14 +262,24 @@ impl Traffic {
             Some(last) => (last.s - p.length, last.v),
             None => (f64::INFINITY, 0.0),
         };
-        if gap < p.min_gap {
+        // Enter no faster than lets IDM keep its desired gap with room to
+        // spare (s* <= 0.8 gap), so insertion never forces braking.
+        let room = 0.8 * gap - p.min_gap;
+        if room < 0.0 {
             return;
         }
+        let v_fit = if gap.is_finite() {
+            let k = 1.0 / (2.0 * (p.accel * p.decel).sqrt());
+            let b = p.tau - k * v_lead;
+            (-b + (b * b + 4.0 * k * room).sqrt()) / (2.0 * k)
+        } else {
+            f64::INFINITY
+        };
         self.pending[li] -= 1;
         let z: f64 = rng.sample(StandardNormal);
         let factor = (p.speed_factor_mean + p.speed_factor_dev * z).clamp(p.speed_factor_min, p.speed_factor_max);
         let v_desired = lane.speed_limit * factor;
-        let v = v_desired.min(krauss_safe_speed(gap - HARD_GAP, v_lead, p.tau, p.emergency_decel));
+        let v = v_desired.min(v_fit);
         let mut car = Car {
             id: self.next_id,
             lane: li,
