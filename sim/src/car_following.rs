@@ -15,7 +15,7 @@ pub fn idm_accel(v: f64, v0: f64, gap: f64, v_lead: f64, p: &TrafficParams) -> f
         return -p.emergency_decel;
     }
     let dv = v - v_lead;
-    let s_star = p.min_gap + (v * p.tau + v * dv / (2.0 * (p.accel * p.decel).sqrt())).max(0.0);
+    let s_star = p.min_gap + (v * p.headway + v * dv / (2.0 * (p.accel * p.decel).sqrt())).max(0.0);
     let ratio = s_star / gap;
     p.accel * (free - ratio * ratio)
 }
@@ -40,7 +40,7 @@ mod tests {
     use super::*;
 
     fn p() -> TrafficParams {
-        TrafficParams::default()
+        TrafficParams { headway: 1.0, ..TrafficParams::default() }
     }
 
     #[test]

@@ -522,16 +522,3 @@ pub(crate) fn ttc(z: &ConflictZone, car: &Car, length: f64) -> f64 {
         f64::INFINITY
     }
 }
-
-/// Time to cover `d` metres from speed `v` under constant acceleration `a`.
-fn time_to_cover(d: f64, v: f64, a: f64) -> f64 {
-    if d <= 0.0 {
-        0.0
-    } else if a > 0.0 {
-        (-v + (v * v + 2.0 * a * d).sqrt()) / a
-    } else if v > 0.05 {
-        d / v
-    } else {
-        f64::INFINITY
-    }
-}

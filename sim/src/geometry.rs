@@ -185,3 +185,88 @@ pub fn wrap_angle(a: f64) -> f64 {
     }
     r
 }
+
+#[cfg(test)]
+mod tests {
+    use std::f64::consts::FRAC_PI_4;
+
+    use super::*;
+
+    fn car(x: f64, y: f64, heading: f64) -> OrientedRect {
+        OrientedRect::new(Vec2::new(x, y), heading, 5.0, 1.8)
+    }
+
+    #[test]
+    fn axis_aligned_overlap() {
+        let a = car(0.0, 0.0, 0.0);
+        // Bumper to bumper 0.1 m apart: separate; 0.1 m overlap: collide.
+        assert!(!a.overlaps(&car(5.1, 0.0, 0.0)));
+        assert!(a.overlaps(&car(4.9, 0.0, 0.0)));
+        // Side by side in adjacent 3.5 m lanes: separate.
+        assert!(!a.overlaps(&car(0.0, 3.5, 0.0)));
+        // Side by side 1.7 m apart (widths 1.8): overlap.
+        assert!(a.overlaps(&car(1.0, 1.7, 0.0)));
+        // Touching counts.
+        assert!(a.overlaps(&car(5.0, 0.0, 0.0)));
+        // Containment.
+        assert!(a.overlaps(&OrientedRect::new(Vec2::new(0.5, 0.1), 0.3, 1.0, 0.5)));
+    }
+
+    #[test]
+    fn crossing_cars() {
+        // A car heading north whose front is 0.5 m short of an eastbound
+        // car's side: the north car spans y in [-3.9, 1.1] around x = 0, the
+        // east car y in [1.6 - 0.9, 1.6 + 0.9] = [0.7, 2.5]: 0.4 m overlap.
+        let north = car(0.0, -1.4, std::f64::consts::FRAC_PI_2);
+        assert!(north.overlaps(&car(0.0, 1.6, 0.0)));
+        // Moved 0.5 m further: front at 0.6 < 0.7: separate.
+        assert!(!car(0.0, -1.9, std::f64::consts::FRAC_PI_2).overlaps(&car(0.0, 1.6, 0.0)));
+    }
+
+    #[test]
+    fn rotated_near_miss_needs_the_separating_axis() {
+        // A unit square next to one rotated 45 degrees (half diagonal
+        // 0.7071), centres on the x axis: they overlap iff the distance is
+        // below 0.5 + 0.7071 = 1.2071.
+        let square = OrientedRect::new(Vec2::new(0.0, 0.0), 0.0, 1.0, 1.0);
+        let diamond = |x: f64| OrientedRect::new(Vec2::new(x, 0.0), FRAC_PI_4, 1.0, 1.0);
+        assert!(square.overlaps(&diamond(1.20)));
+        assert!(!square.overlaps(&diamond(1.22)));
+        // Centred at (1.05, 1.05) the diamond's near edge is the line
+        // x + y = 2.1 - 0.7071 = 1.393, beyond the square's corner
+        // (x + y = 1): separate, although the circumcircles overlap.
+        assert!(!square.overlaps(&OrientedRect::new(Vec2::new(1.05, 1.05), FRAC_PI_4, 1.0, 1.0)));
+        // Two long thin bars crossing like an X overlap.
+        let bar = |h: f64| OrientedRect::new(Vec2::new(0.0, 0.0), h, 10.0, 0.1);
+        assert!(bar(FRAC_PI_4).overlaps(&bar(-FRAC_PI_4)));
+        // Parallel bars 0.2 apart do not, though their circles overlap.
+        assert!(!bar(FRAC_PI_4).overlaps(&OrientedRect::new(Vec2::new(-0.1414, 0.1414), FRAC_PI_4, 10.0, 0.1)));
+    }
+
+    #[test]
+    fn segment_rect_intersection() {
+        let r = OrientedRect::new(Vec2::new(0.0, 0.0), 0.0, 4.0, 2.0);
+        // Through the middle.
+        assert!(r.intersects_segment(Vec2::new(-5.0, 0.0), Vec2::new(5.0, 0.0)));
+        // Passing above.
+        assert!(!r.intersects_segment(Vec2::new(-5.0, 1.1), Vec2::new(5.0, 1.1)));
+        // Stopping short.
+        assert!(!r.intersects_segment(Vec2::new(-5.0, 0.0), Vec2::new(-2.1, 0.0)));
+        // Diagonal clipping a corner: from (1, 3) to (3, 0.5) crosses
+        // y = 1 at x = 2.6 (outside, x half 2), and x = 2 at y = 1.75: misses.
+        assert!(!r.intersects_segment(Vec2::new(1.0, 3.0), Vec2::new(3.0, 0.5)));
+        // From (1, 3) to (2.5, -1): crosses y = 1 at x = 1.75: inside.
+        assert!(r.intersects_segment(Vec2::new(1.0, 3.0), Vec2::new(2.5, -1.0)));
+        // Rotated rectangle.
+        let d = OrientedRect::new(Vec2::new(0.0, 0.0), FRAC_PI_4, 2.0, 2.0);
+        assert!(!d.intersects_segment(Vec2::new(1.3, 1.3), Vec2::new(3.0, 0.0)));
+        assert!(d.intersects_segment(Vec2::new(1.3, -1.3), Vec2::new(-1.3, 1.3)));
+    }
+
+    #[test]
+    fn wrapping() {
+        assert!((wrap_angle(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+        assert!((wrap_angle(-0.5) - -0.5).abs() < 1e-12);
+        assert!((wrap_angle(7.0) - (7.0 - std::f64::consts::TAU)).abs() < 1e-12);
+    }
+}

@@ -274,7 +274,7 @@ impl Scenario {
             return Err(SimError::invalid(what, "ego parameters must be positive"));
         }
         let t = &spec.traffic;
-        if ![t.length, t.width, t.accel, t.decel, t.emergency_decel, t.tau, t.min_gap, t.idm_delta]
+        if ![t.length, t.width, t.accel, t.decel, t.emergency_decel, t.tau, t.headway, t.min_gap, t.idm_delta]
             .into_iter()
             .all(positive)
             || t.emergency_decel < t.decel
