@@ -12,7 +12,9 @@ fn main() -> Result<(), SimError> {
     let trials: u64 = args.next().and_then(|t| t.parse().ok()).unwrap_or(2000);
     let mut names: Vec<String> = args.collect();
     if names.is_empty() {
-        names = ["right", "left", "left2", "forward", "challenge"].map(String::from).to_vec();
+        names = ["right", "left", "left2", "forward", "challenge"]
+            .map(String::from)
+            .to_vec();
     }
     let thresholds: Vec<f64> = (0..=12).map(|i| f64::from(i) * 0.25).collect();
     for name in &names {
@@ -32,7 +34,11 @@ fn main() -> Result<(), SimError> {
         }
         let sc = Arc::new(Scenario::compile(spec)?);
         let creep = sc.spec().occlusion.is_some();
-        let set = if creep { ActionSet::Creep } else { ActionSet::Ttg };
+        let set = if creep {
+            ActionSet::Creep
+        } else {
+            ActionSet::Ttg
+        };
         let t0 = std::time::Instant::now();
         let tune = tune_ttc(&sc, set, creep, &thresholds, trials, 7, &|_| {})?;
         println!("== {name} ({:.1} s)", t0.elapsed().as_secs_f64());
@@ -49,15 +55,20 @@ fn main() -> Result<(), SimError> {
         }
         println!("  best: {:?}", tune.best);
         for set in [set, ActionSet::Sequential] {
-        let r = evaluate(&sc, &RandomPolicy, &EvalConfig::new(set, trials, 7), &|_| {})?;
-        println!(
-            "  random {set}: succ {:.2} coll {:.2} tout {:.2} time {:?} brake {:.2}",
-            100.0 * r.success_rate,
-            100.0 * r.collision_rate,
-            100.0 * r.timeout_rate,
-            r.mean_time_s,
-            r.mean_brake_s
-        );
+            let r = evaluate(
+                &sc,
+                &RandomPolicy,
+                &EvalConfig::new(set, trials, 7),
+                &|_| {},
+            )?;
+            println!(
+                "  random {set}: succ {:.2} coll {:.2} tout {:.2} time {:?} brake {:.2}",
+                100.0 * r.success_rate,
+                100.0 * r.collision_rate,
+                100.0 * r.timeout_rate,
+                r.mean_time_s,
+                r.mean_brake_s
+            );
         }
     }
     Ok(())

@@ -72,7 +72,11 @@ impl ActionSet {
 
     /// Decodes an action index.
     pub fn decode(self, action: usize) -> Result<Control, SimError> {
-        let out = || SimError::ActionOutOfRange { action, set: self.name(), count: self.num_actions() };
+        let out = || SimError::ActionOutOfRange {
+            action,
+            set: self.name(),
+            count: self.num_actions(),
+        };
         Ok(match self {
             Self::Ttg => match action {
                 0 => Control::Go,
@@ -126,10 +130,13 @@ impl ActionSet {
 impl std::str::FromStr for ActionSet {
     type Err = SimError;
     fn from_str(s: &str) -> Result<Self, SimError> {
-        Self::ALL.into_iter().find(|a| a.name() == s).ok_or_else(|| SimError::PolicySpec {
-            spec: s.to_owned(),
-            problem: "action set must be ttg, sequential or creep".to_owned(),
-        })
+        Self::ALL
+            .into_iter()
+            .find(|a| a.name() == s)
+            .ok_or_else(|| SimError::PolicySpec {
+                spec: s.to_owned(),
+                problem: "action set must be ttg, sequential or creep".to_owned(),
+            })
     }
 }
 
@@ -148,13 +155,25 @@ mod tests {
         assert_eq!(ActionSet::Ttg.decode(0).unwrap(), Control::Go);
         assert_eq!(ActionSet::Ttg.decode(4).unwrap(), Control::Wait(8));
         assert!(ActionSet::Ttg.decode(5).is_err());
-        assert_eq!(ActionSet::Sequential.decode(0).unwrap(), Control::Accel(1, 1));
-        assert_eq!(ActionSet::Sequential.decode(4).unwrap(), Control::Accel(-1, 2));
-        assert_eq!(ActionSet::Sequential.decode(11).unwrap(), Control::Accel(0, 8));
+        assert_eq!(
+            ActionSet::Sequential.decode(0).unwrap(),
+            Control::Accel(1, 1)
+        );
+        assert_eq!(
+            ActionSet::Sequential.decode(4).unwrap(),
+            Control::Accel(-1, 2)
+        );
+        assert_eq!(
+            ActionSet::Sequential.decode(11).unwrap(),
+            Control::Accel(0, 8)
+        );
         assert!(ActionSet::Sequential.decode(12).is_err());
         assert_eq!(ActionSet::Creep.decode(1).unwrap(), Control::Creep);
         assert!(ActionSet::Creep.decode(3).is_err());
-        assert_eq!("sequential".parse::<ActionSet>().unwrap(), ActionSet::Sequential);
+        assert_eq!(
+            "sequential".parse::<ActionSet>().unwrap(),
+            ActionSet::Sequential
+        );
         assert!("x".parse::<ActionSet>().is_err());
         for set in ActionSet::ALL {
             for intent in [Intent::Wait, Intent::Go] {

@@ -49,7 +49,11 @@ impl EnvConfig {
             ActionSet::Sequential => ObsKind::Sequential,
             ActionSet::Ttg | ActionSet::Creep => ObsKind::Ttg,
         };
-        Self { action_set, observation, gamma: 0.99 }
+        Self {
+            action_set,
+            observation,
+            gamma: 0.99,
+        }
     }
 }
 
@@ -125,7 +129,11 @@ impl Env {
             config,
             rng: Xoshiro256PlusPlus::seed_from_u64(0),
             traffic,
-            ego: Ego { s: 0.0, v: 0.0, committed: false },
+            ego: Ego {
+                s: 0.0,
+                v: 0.0,
+                committed: false,
+            },
             ego_rect: OrientedRect::new(Vec2::default(), 0.0, 1.0, 1.0),
             sensor: Vec2::default(),
             occluders: Vec::with_capacity(4 + scenario.fixed_obstacles().len()),
@@ -148,7 +156,8 @@ impl Env {
         self.rng = Xoshiro256PlusPlus::seed_from_u64(seed);
         self.traffic.clear();
         self.occluders.clear();
-        self.occluders.extend_from_slice(self.scenario.fixed_obstacles());
+        self.occluders
+            .extend_from_slice(self.scenario.fixed_obstacles());
         self.layout = self.scenario.spec().occlusion.as_ref().map(|occ| {
             let layout = occ.sample(&mut self.rng);
             occ.place(&layout, &mut self.occluders);
@@ -161,11 +170,16 @@ impl Env {
         self.traffic.reset_counters();
         self.foes.iter_mut().for_each(|f| *f = EgoFoe::None);
         self.foe_time.iter_mut().for_each(|t| *t = 0.0);
-        self.ego = Ego { s: self.scenario.spec().ego.stop_line_s, v: 0.0, committed: false };
+        self.ego = Ego {
+            s: self.scenario.spec().ego.stop_line_s,
+            v: 0.0,
+            committed: false,
+        };
         self.steps = 0;
         self.outcome = None;
         self.visible_from = None;
         self.update_ego_geometry();
+        self.refresh_visibility();
     }
 
     /// Applies one action: one transition, possibly several simulation
@@ -173,7 +187,12 @@ impl Env {
     pub fn step(&mut self, action: usize) -> Result<StepResult, SimError> {
         let control = self.config.action_set.decode(action)?;
         let gamma = self.config.gamma;
-        let mut result = StepResult { reward: 0.0, steps: 0, done: self.outcome.is_some(), outcome: self.outcome };
+        let mut result = StepResult {
+            reward: 0.0,
+            steps: 0,
+            done: self.outcome.is_some(),
+            outcome: self.outcome,
+        };
         if result.done {
             return Ok(result);
         }
@@ -194,6 +213,7 @@ impl Env {
         }
         result.done = self.outcome.is_some();
         result.outcome = self.outcome;
+        self.refresh_visibility();
         Ok(result)
     }
 
@@ -247,7 +267,11 @@ impl Env {
             }
             Control::Creep => {
                 let target = p.creep_speed.min(cap);
-                let v = if ego.v < target { (ego.v + p.accel * dt).min(target) } else { stop.max(target) };
+                let v = if ego.v < target {
+                    (ego.v + p.accel * dt).min(target)
+                } else {
+                    stop.max(target)
+                };
                 // Never past the creep limit; past it already, creep waits.
                 v.min(((e.creep_limit_s - ego.s) / dt).max(0.0))
             }
@@ -260,6 +284,11 @@ impl Env {
         let p = &self.scenario.spec().ego.params;
         self.ego_rect = ego_rect(self.scenario.ego_path(), p, self.ego.s);
         self.sensor = self.ego_rect.center + self.ego_rect.axis * self.ego_rect.half_length;
+    }
+
+    /// Recomputes which observation cells the sensor sees, if the sensor
+    /// moved; once per transition, not per simulation step.
+    fn refresh_visibility(&mut self) {
         if self.scenario.occlusion_channels() {
             let key = (self.sensor, self.ego_rect.axis.x);
             if self.visible_from != Some(key) {
@@ -285,10 +314,13 @@ impl Env {
                 if ego.s >= z.ego_in && ego.s <= z.ego_out {
                     let mut rear = f64::INFINITY;
                     for c in self.ego_rect.corners() {
-                        rear = rear.min(lane.path.project(c).0);
+                        rear = rear.min(lane.coordinate(c));
                     }
-                    let lane_dir = lane.path.pose_at(rear).heading;
-                    let v = (ego.v * (self.ego_rect.axis.y.atan2(self.ego_rect.axis.x) - lane_dir).cos()).max(0.0);
+                    let lane_dir = match lane.straight {
+                        Some((_, dir, _)) => dir,
+                        None => Vec2::from_angle(lane.path.pose_at(rear).heading),
+                    };
+                    let v = (ego.v * self.ego_rect.axis.dot(lane_dir)).max(0.0);
                     foe = EgoFoe::Occupying { rear, v };
                     self.foe_time[i] = tp.reaction_delay_s;
                 } else if ego.s < z.ego_in
@@ -301,7 +333,11 @@ impl Env {
                     if near && t_enter <= tp.yield_horizon_s {
                         self.foe_time[i] += dt;
                         if self.foe_time[i] >= tp.reaction_delay_s {
-                            foe = EgoFoe::Entering { lane_in: z.lane_in, lane_clear: z.lane_clear(), t_enter };
+                            foe = EgoFoe::Entering {
+                                lane_in: z.lane_in,
+                                lane_clear: z.lane_clear(),
+                                t_enter,
+                            };
                         }
                     } else {
                         self.foe_time[i] = 0.0;
@@ -324,7 +360,11 @@ impl Env {
             return 0.0;
         }
         if !ego.committed {
-            return if ego.v > 0.05 { (target - ego.s) / ego.v } else { f64::INFINITY };
+            return if ego.v > 0.05 {
+                (target - ego.s) / ego.v
+            } else {
+                f64::INFINITY
+            };
         }
         let sc = &self.scenario;
         let (dt, a) = (sc.dt(), sc.spec().ego.params.accel);
@@ -343,7 +383,9 @@ impl Env {
 
     fn collides(&self) -> bool {
         let tp = &self.scenario.spec().traffic;
-        self.traffic.cars().any(|c| c.rect(tp.length, tp.width).overlaps(&self.ego_rect))
+        self.traffic
+            .cars()
+            .any(|c| c.rect(tp.length, tp.width).overlaps(&self.ego_rect))
     }
 
     /// Writes the observation into `out`, which must be
@@ -354,7 +396,9 @@ impl Env {
 
     /// Shape of the observations this environment writes.
     pub fn obs_spec(&self) -> ObsSpec {
-        self.config.observation.spec(self.scenario.occlusion_channels())
+        self.config
+            .observation
+            .spec(self.scenario.occlusion_channels())
     }
 
     /// The fixed settings.
@@ -500,6 +544,7 @@ impl Env {
         self.ego = Ego { s, v, committed };
         self.visible_from = None;
         self.update_ego_geometry();
+        self.refresh_visibility();
     }
 
     /// Scene construction: replaces this episode's occluders.
@@ -508,6 +553,7 @@ impl Env {
         self.occluders.extend_from_slice(occluders);
         self.visible_from = None;
         self.update_ego_geometry();
+        self.refresh_visibility();
     }
 }
 

@@ -81,6 +81,9 @@ pub enum SimError {
 
 impl SimError {
     pub(crate) fn invalid(what: &str, problem: impl Into<String>) -> Self {
-        Self::Invalid { what: what.to_owned(), problem: problem.into() }
+        Self::Invalid {
+            what: what.to_owned(),
+            problem: problem.into(),
+        }
     }
 }

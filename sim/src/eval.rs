@@ -33,7 +33,12 @@ pub struct EvalConfig {
 impl EvalConfig {
     /// `trials` trials from `seed`, batches of 32.
     pub fn new(action_set: ActionSet, trials: u64, seed: u64) -> Self {
-        Self { action_set, trials, seed, batch: 32 }
+        Self {
+            action_set,
+            trials,
+            seed,
+            batch: 32,
+        }
     }
 }
 
@@ -172,8 +177,11 @@ fn run_chunk(
             }
             let m = envs[i].metrics();
             if let Some(outcome) = m.outcome {
-                results[(ids[i] - start) as usize] =
-                    Some(TrialResult { outcome, time_s: m.time_s, brake_s: m.brake_time_s });
+                results[(ids[i] - start) as usize] = Some(TrialResult {
+                    outcome,
+                    time_s: m.time_s,
+                    brake_s: m.brake_time_s,
+                });
             }
             progress(1);
             if next < end {
@@ -191,16 +199,31 @@ fn run_chunk(
     }
     results
         .into_iter()
-        .map(|r| r.ok_or_else(|| SimError::EvalConfig("a trial ended without an outcome".to_owned())))
+        .map(|r| {
+            r.ok_or_else(|| SimError::EvalConfig("a trial ended without an outcome".to_owned()))
+        })
         .collect()
 }
 
 /// Summarizes trial results (in trial order) into a report.
-pub fn summarize(scenario: &str, policy: &str, config: &EvalConfig, results: &[TrialResult]) -> EvalReport {
+pub fn summarize(
+    scenario: &str,
+    policy: &str,
+    config: &EvalConfig,
+    results: &[TrialResult],
+) -> EvalReport {
     let n = results.len() as u64;
     let count = |o: Outcome| results.iter().filter(|r| r.outcome == o).count() as u64;
-    let (succ, coll, tout) = (count(Outcome::Success), count(Outcome::Collision), count(Outcome::Timeout));
-    let times: Vec<f64> = results.iter().filter(|r| r.outcome == Outcome::Success).map(|r| r.time_s).collect();
+    let (succ, coll, tout) = (
+        count(Outcome::Success),
+        count(Outcome::Collision),
+        count(Outcome::Timeout),
+    );
+    let times: Vec<f64> = results
+        .iter()
+        .filter(|r| r.outcome == Outcome::Success)
+        .map(|r| r.time_s)
+        .collect();
     let brakes: Vec<f64> = results.iter().map(|r| r.brake_s).collect();
     let time = mean_ci(&times);
     let brake = mean_ci(&brakes);
@@ -219,7 +242,13 @@ pub fn summarize(scenario: &str, policy: &str, config: &EvalConfig, results: &[T
         mean_time_s: time.map(|t| t.0),
         mean_time_ci: time.map(|t| t.1),
         mean_brake_s: brake.map_or(0.0, |b| b.0),
-        mean_brake_ci: brake.map_or(Interval { low: 0.0, high: 0.0 }, |b| b.1),
+        mean_brake_ci: brake.map_or(
+            Interval {
+                low: 0.0,
+                high: 0.0,
+            },
+            |b| b.1,
+        ),
     }
 }
 
@@ -230,7 +259,10 @@ fn rate(k: u64, n: u64) -> f64 {
 /// Wilson score interval of `k` successes in `n` trials.
 pub fn wilson(k: u64, n: u64) -> Interval {
     if n == 0 {
-        return Interval { low: 0.0, high: 1.0 };
+        return Interval {
+            low: 0.0,
+            high: 1.0,
+        };
     }
     let n = n as f64;
     let p = k as f64 / n;
@@ -238,7 +270,10 @@ pub fn wilson(k: u64, n: u64) -> Interval {
     let denom = 1.0 + z2 / n;
     let center = (p + z2 / (2.0 * n)) / denom;
     let half = Z95 * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt() / denom;
-    Interval { low: (center - half).max(0.0), high: (center + half).min(1.0) }
+    Interval {
+        low: (center - half).max(0.0),
+        high: (center + half).min(1.0),
+    }
 }
 
 fn mean_ci(xs: &[f64]) -> Option<(f64, Interval)> {
@@ -247,9 +282,19 @@ fn mean_ci(xs: &[f64]) -> Option<(f64, Interval)> {
     }
     let n = xs.len() as f64;
     let mean = xs.iter().sum::<f64>() / n;
-    let var = if xs.len() > 1 { xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+    let var = if xs.len() > 1 {
+        xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
     let half = Z95 * (var / n).sqrt();
-    Some((mean, Interval { low: mean - half, high: mean + half }))
+    Some((
+        mean,
+        Interval {
+            low: mean - half,
+            high: mean + half,
+        },
+    ))
 }
 
 #[cfg(test)]
@@ -260,7 +305,10 @@ mod tests {
     fn wilson_interval_values() {
         // 50 of 100: 0.5 +- 0.0962 (textbook value 0.4038 .. 0.5962).
         let i = wilson(50, 100);
-        assert!((i.low - 0.4038).abs() < 1e-3 && (i.high - 0.5962).abs() < 1e-3, "{i:?}");
+        assert!(
+            (i.low - 0.4038).abs() < 1e-3 && (i.high - 0.5962).abs() < 1e-3,
+            "{i:?}"
+        );
         // 0 of 10000 still has a positive upper end.
         let z = wilson(0, 10_000);
         assert_eq!(z.low, 0.0);

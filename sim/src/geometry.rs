@@ -120,7 +120,8 @@ impl OrientedRect {
 
     /// Half the extent of the rectangle projected on unit vector `dir`.
     fn half_extent_on(&self, dir: Vec2) -> f64 {
-        self.half_length * self.axis.dot(dir).abs() + self.half_width * self.axis.perp().dot(dir).abs()
+        self.half_length * self.axis.dot(dir).abs()
+            + self.half_width * self.axis.perp().dot(dir).abs()
     }
 
     /// Whether the two rectangles overlap (touching counts as overlap).
@@ -235,12 +236,22 @@ mod tests {
         // Centred at (1.05, 1.05) the diamond's near edge is the line
         // x + y = 2.1 - 0.7071 = 1.393, beyond the square's corner
         // (x + y = 1): separate, although the circumcircles overlap.
-        assert!(!square.overlaps(&OrientedRect::new(Vec2::new(1.05, 1.05), FRAC_PI_4, 1.0, 1.0)));
+        assert!(!square.overlaps(&OrientedRect::new(
+            Vec2::new(1.05, 1.05),
+            FRAC_PI_4,
+            1.0,
+            1.0
+        )));
         // Two long thin bars crossing like an X overlap.
         let bar = |h: f64| OrientedRect::new(Vec2::new(0.0, 0.0), h, 10.0, 0.1);
         assert!(bar(FRAC_PI_4).overlaps(&bar(-FRAC_PI_4)));
         // Parallel bars 0.2 apart do not, though their circles overlap.
-        assert!(!bar(FRAC_PI_4).overlaps(&OrientedRect::new(Vec2::new(-0.1414, 0.1414), FRAC_PI_4, 10.0, 0.1)));
+        assert!(!bar(FRAC_PI_4).overlaps(&OrientedRect::new(
+            Vec2::new(-0.1414, 0.1414),
+            FRAC_PI_4,
+            10.0,
+            0.1
+        )));
     }
 
     #[test]

@@ -89,7 +89,14 @@ impl ObsKind {
             Self::Ttg => (3 + extra, TTG_ROWS, TTG_COLS),
             Self::Sequential => (4 + extra, SEQ_ROWS, SEQ_COLS),
         };
-        ObsSpec { kind: self, channels, rows, cols, ego_features: EGO_FEATURES, occlusion }
+        ObsSpec {
+            kind: self,
+            channels,
+            rows,
+            cols,
+            ego_features: EGO_FEATURES,
+            occlusion,
+        }
     }
 
     /// Lower-case name.
@@ -115,10 +122,20 @@ struct Frame {
 impl Frame {
     fn of(env: &Env, kind: ObsKind) -> Self {
         match kind {
-            ObsKind::Ttg => Self { origin: Vec2::default(), u: Vec2::new(1.0, 0.0), v: Vec2::new(0.0, 1.0), kind },
+            ObsKind::Ttg => Self {
+                origin: Vec2::default(),
+                u: Vec2::new(1.0, 0.0),
+                v: Vec2::new(0.0, 1.0),
+                kind,
+            },
             ObsKind::Sequential => {
                 let f = env.ego_rect.axis;
-                Self { origin: env.sensor, u: f, v: f.perp(), kind }
+                Self {
+                    origin: env.sensor,
+                    u: f,
+                    v: f.perp(),
+                    kind,
+                }
             }
         }
     }
@@ -146,7 +163,10 @@ impl Frame {
         let (r, c) = (row as f64 + 0.5, col as f64 + 0.5);
         let (a, b) = match self.kind {
             ObsKind::Ttg => (TTG_X_MIN + c * TTG_CELL_X, TTG_Y_MAX - r * TTG_CELL_Y),
-            ObsKind::Sequential => (r * SEQ_CELL_FWD, SEQ_HALF_LAT - c * (2.0 * SEQ_HALF_LAT / SEQ_COLS as f64)),
+            ObsKind::Sequential => (
+                r * SEQ_CELL_FWD,
+                SEQ_HALF_LAT - c * (2.0 * SEQ_HALF_LAT / SEQ_COLS as f64),
+            ),
         };
         self.origin + self.u * a + self.v * b
     }
@@ -183,7 +203,10 @@ pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), Sim
     let sc = env.scenario();
     let spec = kind.spec(sc.occlusion_channels());
     if out.len() != spec.len() {
-        return Err(SimError::BufferLength { expected: spec.len(), got: out.len() });
+        return Err(SimError::BufferLength {
+            expected: spec.len(),
+            got: out.len(),
+        });
     }
     out.fill(0.0);
     let frame = Frame::of(env, kind);
@@ -201,7 +224,9 @@ pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), Sim
     let limit = sc.spec().speed_limit;
     let ego_heading = env.ego_rect.axis.y.atan2(env.ego_rect.axis.x);
     for car in env.traffic().cars() {
-        let Some((row, col, dr, dc)) = frame.cell(car.pos) else { continue };
+        let Some((row, col, dr, dc)) = frame.cell(car.pos) else {
+            continue;
+        };
         let cell = row * spec.cols + col;
         if spec.occlusion && !env.cell_visible[cell] {
             continue;

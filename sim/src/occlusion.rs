@@ -101,12 +101,19 @@ pub struct OcclusionLayout {
 
 impl OcclusionSpec {
     pub(crate) fn validate(&self, what: &str) -> Result<(), SimError> {
-        if self.sides.is_empty() || self.lengths.is_empty() || self.widths.is_empty() || self.offsets.is_empty() {
+        if self.sides.is_empty()
+            || self.lengths.is_empty()
+            || self.widths.is_empty()
+            || self.offsets.is_empty()
+        {
             return Err(SimError::invalid(what, "occlusion lists must not be empty"));
         }
         let all = self.lengths.iter().chain(&self.widths).chain(&self.offsets);
         if all.clone().any(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(SimError::invalid(what, "occluder sizes and offsets must be positive"));
+            return Err(SimError::invalid(
+                what,
+                "occluder sizes and offsets must be positive",
+            ));
         }
         Ok(())
     }
@@ -139,7 +146,12 @@ impl OcclusionSpec {
             Side::Both => &[-1.0, 1.0],
         };
         for &sx in sides {
-            out.push(OrientedRect::new(Vec2::new(sx * mid, cy), 0.0, len, layout.width));
+            out.push(OrientedRect::new(
+                Vec2::new(sx * mid, cy),
+                0.0,
+                len,
+                layout.width,
+            ));
         }
     }
 }
@@ -169,7 +181,12 @@ mod tests {
     #[test]
     fn places_walls_from_the_outer_boundary() {
         let mut out = Vec::new();
-        let layout = OcclusionLayout { side: Side::Both, length: 30.0, width: 1.0, offset: 51.0 };
+        let layout = OcclusionLayout {
+            side: Side::Both,
+            length: 30.0,
+            width: 1.0,
+            offset: 51.0,
+        };
         spec().place(&layout, &mut out);
         assert_eq!(out.len(), 2);
         // Far end 49 m from the centre, near end 19 m.
@@ -183,7 +200,12 @@ mod tests {
         assert!((out[1].center.x - 34.0).abs() < 1e-9);
         // A long wall is clipped at the corner.
         let mut out = Vec::new();
-        let long = OcclusionLayout { side: Side::Right, length: 90.0, width: 2.0, offset: 51.0 };
+        let long = OcclusionLayout {
+            side: Side::Right,
+            length: 90.0,
+            width: 2.0,
+            offset: 51.0,
+        };
         spec().place(&long, &mut out);
         assert!((out[0].center.x - 0.5 * (49.0 + 4.5)).abs() < 1e-9);
     }
@@ -193,7 +215,15 @@ mod tests {
     #[test]
     fn ray_cast_on_hand_computed_scene() {
         let mut walls = Vec::new();
-        spec().place(&OcclusionLayout { side: Side::Left, length: 30.0, width: 1.0, offset: 51.0 }, &mut walls);
+        spec().place(
+            &OcclusionLayout {
+                side: Side::Left,
+                length: 30.0,
+                width: 1.0,
+                offset: 51.0,
+            },
+            &mut walls,
+        );
         let eye = Vec2::new(1.75, -9.0);
         // Towards (-30, -5.25): crosses y = -7.5 at x = 1.75 - 0.4 * 31.75 = -10.95,
         // y = -8.5 at x = 1.75 - (0.5/3.75) * 31.75 = -2.48: misses the wall
@@ -208,6 +238,10 @@ mod tests {
         // The right side is free.
         assert!(line_of_sight(eye, Vec2::new(80.0, -5.25), &walls));
         // A target behind the wall, seen straight on, is hidden.
-        assert!(!line_of_sight(Vec2::new(-30.0, -5.0), Vec2::new(-30.0, -20.0), &walls));
+        assert!(!line_of_sight(
+            Vec2::new(-30.0, -5.0),
+            Vec2::new(-30.0, -20.0),
+            &walls
+        ));
     }
 }

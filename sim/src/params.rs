@@ -145,6 +145,10 @@ pub struct Rewards {
 
 impl Default for Rewards {
     fn default() -> Self {
-        Self { success: 1.0, collision: -10.0, step: -0.01 }
+        Self {
+            success: 1.0,
+            collision: -10.0,
+            step: -0.01,
+        }
     }
 }

@@ -36,8 +36,16 @@ pub struct PathSpec {
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Segment {
-    Line { start: Vec2, dir: Vec2 },
-    Arc { center: Vec2, radius: f64, start_angle: f64, sign: f64 },
+    Line {
+        start: Vec2,
+        dir: Vec2,
+    },
+    Arc {
+        center: Vec2,
+        radius: f64,
+        start_angle: f64,
+        sign: f64,
+    },
 }
 
 /// A compiled path: pose and curvature at any arc length.
@@ -63,7 +71,10 @@ impl Path {
             match *piece {
                 PieceSpec::Straight(len) => {
                     if !(len.is_finite() && len > 0.0) {
-                        return Err(SimError::invalid(what, "straight pieces need a positive length"));
+                        return Err(SimError::invalid(
+                            what,
+                            "straight pieces need a positive length",
+                        ));
                     }
                     let dir = Vec2::from_angle(heading);
                     segments.push(Segment::Line { start: pos, dir });
@@ -71,14 +82,26 @@ impl Path {
                     s += len;
                 }
                 PieceSpec::Turn { radius, angle_deg } => {
-                    if !(radius.is_finite() && radius > 0.0 && angle_deg.is_finite() && angle_deg != 0.0) {
-                        return Err(SimError::invalid(what, "turns need a positive radius and a non-zero angle"));
+                    if !(radius.is_finite()
+                        && radius > 0.0
+                        && angle_deg.is_finite()
+                        && angle_deg != 0.0)
+                    {
+                        return Err(SimError::invalid(
+                            what,
+                            "turns need a positive radius and a non-zero angle",
+                        ));
                     }
                     let sign = angle_deg.signum();
                     // The centre lies on the side the path turns to.
                     let center = pos + Vec2::from_angle(heading).perp() * (sign * radius);
                     let start_angle = heading - sign * std::f64::consts::FRAC_PI_2;
-                    segments.push(Segment::Arc { center, radius, start_angle, sign });
+                    segments.push(Segment::Arc {
+                        center,
+                        radius,
+                        start_angle,
+                        sign,
+                    });
                     let sweep = angle_deg.to_radians();
                     heading += sweep;
                     let end_angle = start_angle + sweep;
@@ -89,6 +112,15 @@ impl Path {
             starts.push(s);
         }
         Ok(Self { segments, starts })
+    }
+
+    /// Start point and unit direction, if the path is one straight piece;
+    /// lets hot loops skip the general pose computation.
+    pub fn as_straight(&self) -> Option<(Vec2, Vec2)> {
+        match self.segments.as_slice() {
+            [Segment::Line { start, dir }] => Some((*start, *dir)),
+            _ => None,
+        }
     }
 
     /// Total arc length, metres.
@@ -129,7 +161,12 @@ impl Path {
                 pos: start + dir * local,
                 heading: dir.y.atan2(dir.x),
             },
-            Segment::Arc { center, radius, start_angle, sign } => {
+            Segment::Arc {
+                center,
+                radius,
+                start_angle,
+                sign,
+            } => {
                 let a = start_angle + sign * local / radius;
                 Pose {
                     pos: center + Vec2::from_angle(a) * radius,
@@ -175,7 +212,12 @@ impl Path {
                     let d = p - start;
                     (d.dot(dir).clamp(lo, hi), dir.cross(d))
                 }
-                Segment::Arc { center, radius, start_angle, sign } => {
+                Segment::Arc {
+                    center,
+                    radius,
+                    start_angle,
+                    sign,
+                } => {
                     let d = p - center;
                     let ang = d.y.atan2(d.x);
                     let delta = crate::geometry::wrap_angle(sign * (ang - start_angle));
@@ -199,7 +241,11 @@ mod tests {
     use super::*;
 
     fn spec(pieces: Vec<PieceSpec>) -> PathSpec {
-        PathSpec { start: [0.0, 0.0], heading_deg: 90.0, pieces }
+        PathSpec {
+            start: [0.0, 0.0],
+            heading_deg: 90.0,
+            pieces,
+        }
     }
 
     #[test]
@@ -207,7 +253,10 @@ mod tests {
         let p = Path::from_spec(
             &spec(vec![
                 PieceSpec::Straight(10.0),
-                PieceSpec::Turn { radius: 5.0, angle_deg: 90.0 },
+                PieceSpec::Turn {
+                    radius: 5.0,
+                    angle_deg: 90.0,
+                },
                 PieceSpec::Straight(3.0),
             ]),
             "t",
@@ -228,7 +277,13 @@ mod tests {
     #[test]
     fn right_turn_and_projection_on_arc() {
         let p = Path::from_spec(
-            &spec(vec![PieceSpec::Straight(2.0), PieceSpec::Turn { radius: 4.0, angle_deg: -90.0 }]),
+            &spec(vec![
+                PieceSpec::Straight(2.0),
+                PieceSpec::Turn {
+                    radius: 4.0,
+                    angle_deg: -90.0,
+                },
+            ]),
             "t",
         )
         .unwrap();
@@ -252,6 +307,15 @@ mod tests {
     fn rejects_bad_pieces() {
         assert!(Path::from_spec(&spec(vec![]), "t").is_err());
         assert!(Path::from_spec(&spec(vec![PieceSpec::Straight(-1.0)]), "t").is_err());
-        assert!(Path::from_spec(&spec(vec![PieceSpec::Turn { radius: 0.0, angle_deg: 9.0 }]), "t").is_err());
+        assert!(
+            Path::from_spec(
+                &spec(vec![PieceSpec::Turn {
+                    radius: 0.0,
+                    angle_deg: 9.0
+                }]),
+                "t"
+            )
+            .is_err()
+        );
     }
 }

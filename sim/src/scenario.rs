@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
-use crate::geometry::OrientedRect;
+use crate::geometry::{OrientedRect, Vec2};
 use crate::occlusion::{ObstacleSpec, OcclusionSpec, Side};
 use crate::params::{EgoParams, Rewards, TrafficParams};
 use crate::path::{Path, PathSpec};
@@ -16,9 +16,18 @@ const BUILTIN: &[(&str, &str)] = &[
     ("right", include_str!("../../configs/scenarios/right.toml")),
     ("left", include_str!("../../configs/scenarios/left.toml")),
     ("left2", include_str!("../../configs/scenarios/left2.toml")),
-    ("forward", include_str!("../../configs/scenarios/forward.toml")),
-    ("challenge", include_str!("../../configs/scenarios/challenge.toml")),
-    ("occluded", include_str!("../../configs/scenarios/occluded.toml")),
+    (
+        "forward",
+        include_str!("../../configs/scenarios/forward.toml"),
+    ),
+    (
+        "challenge",
+        include_str!("../../configs/scenarios/challenge.toml"),
+    ),
+    (
+        "occluded",
+        include_str!("../../configs/scenarios/occluded.toml"),
+    ),
 ];
 
 /// A scenario as written in a TOML file. See `configs/scenarios/` for
@@ -141,7 +150,11 @@ impl ConflictZone {
     /// threat: the far edge of a crossing, the entry point of a merge (once
     /// past it, the car drives away ahead of the ego).
     pub fn lane_clear(&self) -> f64 {
-        if self.merge { self.lane_merge_clear } else { self.lane_out }
+        if self.merge {
+            self.lane_merge_clear
+        } else {
+            self.lane_out
+        }
     }
 }
 
@@ -158,6 +171,19 @@ pub struct Lane {
     pub emission_per_s: f64,
     /// Where the ego's path meets this lane, if it does.
     pub zone: Option<ConflictZone>,
+    /// Start, unit direction and heading when the lane is one straight
+    /// piece (all built-in lanes), for fast placement of cars.
+    pub straight: Option<(Vec2, Vec2, f64)>,
+}
+
+impl Lane {
+    /// Lane coordinate of the point of the centre line nearest to `p`.
+    pub fn coordinate(&self, p: Vec2) -> f64 {
+        match self.straight {
+            Some((start, dir, _)) => (p - start).dot(dir),
+            None => self.path.project(p).0,
+        }
+    }
 }
 
 /// A compiled scenario, ready to simulate. Cheap to share behind an `Arc`.
@@ -191,7 +217,10 @@ impl Scenario {
     pub fn builtin(name: &str) -> Result<Self, SimError> {
         let unknown = || SimError::UnknownScenario {
             name: name.to_owned(),
-            known: format!("{}, occluded-<30|60|90>[-<left|right|both>]", Self::builtin_names().join(", ")),
+            known: format!(
+                "{}, occluded-<30|60|90>[-<left|right|both>]",
+                Self::builtin_names().join(", ")
+            ),
         };
         if let Some((_, text)) = BUILTIN.iter().find(|(n, _)| *n == name) {
             return Self::from_toml_str(text, name);
@@ -199,11 +228,17 @@ impl Scenario {
         let Some(rest) = name.strip_prefix("occluded-") else {
             return Err(unknown());
         };
-        let (_, text) = BUILTIN.iter().find(|(n, _)| *n == "occluded").ok_or_else(unknown)?;
+        let (_, text) = BUILTIN
+            .iter()
+            .find(|(n, _)| *n == "occluded")
+            .ok_or_else(unknown)?;
         let mut spec = parse_spec(text, "occluded")?;
         let occ = spec.occlusion.as_mut().ok_or_else(unknown)?;
         let mut parts = rest.split('-');
-        let length: f64 = parts.next().and_then(|l| l.parse().ok()).ok_or_else(unknown)?;
+        let length: f64 = parts
+            .next()
+            .and_then(|l| l.parse().ok())
+            .ok_or_else(unknown)?;
         occ.lengths = vec![length];
         if let Some(side) = parts.next() {
             occ.sides = vec![match side {
@@ -223,7 +258,10 @@ impl Scenario {
     /// A built-in scenario by name, or a scenario file if `name_or_path`
     /// ends in `.toml` or contains a path separator.
     pub fn load(name_or_path: &str) -> Result<Self, SimError> {
-        if name_or_path.ends_with(".toml") || name_or_path.contains(std::path::MAIN_SEPARATOR) || name_or_path.contains('/') {
+        if name_or_path.ends_with(".toml")
+            || name_or_path.contains(std::path::MAIN_SEPARATOR)
+            || name_or_path.contains('/')
+        {
             Self::from_file(std::path::Path::new(name_or_path))
         } else {
             Self::builtin(name_or_path)
@@ -232,7 +270,10 @@ impl Scenario {
 
     /// Reads a scenario file.
     pub fn from_file(path: &std::path::Path) -> Result<Self, SimError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io { path: path.to_owned(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
@@ -247,36 +288,66 @@ impl Scenario {
         let what = what.as_str();
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !positive(spec.step_s) || spec.step_limit == 0 || !positive(spec.speed_limit) {
-            return Err(SimError::invalid(what, "step_s, step_limit and speed_limit must be positive"));
+            return Err(SimError::invalid(
+                what,
+                "step_s, step_limit and speed_limit must be positive",
+            ));
         }
         if !(spec.warmup_s.is_finite() && spec.warmup_s >= 0.0) {
             return Err(SimError::invalid(what, "warmup_s must be zero or more"));
         }
         if spec.lanes.is_empty() {
-            return Err(SimError::invalid(what, "a scenario needs at least one lane"));
+            return Err(SimError::invalid(
+                what,
+                "a scenario needs at least one lane",
+            ));
         }
         let ego_path = Path::from_spec(&spec.ego.path, &format!("{what} ego path"))?;
         let e = &spec.ego;
-        if !(e.stop_line_s < e.creep_limit_s && e.creep_limit_s < e.goal_s && e.goal_s <= ego_path.length()) {
+        if !(e.stop_line_s < e.creep_limit_s
+            && e.creep_limit_s < e.goal_s
+            && e.goal_s <= ego_path.length())
+        {
             return Err(SimError::invalid(
                 what,
                 "the ego needs stop_line_s < creep_limit_s < goal_s <= path length",
             ));
         }
         if e.stop_line_s < e.params.length {
-            return Err(SimError::invalid(what, "the ego's path must start a car length before the stop line"));
+            return Err(SimError::invalid(
+                what,
+                "the ego's path must start a car length before the stop line",
+            ));
         }
         let p = &e.params;
-        if ![p.length, p.width, p.accel, p.decel, p.max_speed, p.lateral_accel, p.creep_speed]
-            .into_iter()
-            .all(positive)
+        if ![
+            p.length,
+            p.width,
+            p.accel,
+            p.decel,
+            p.max_speed,
+            p.lateral_accel,
+            p.creep_speed,
+        ]
+        .into_iter()
+        .all(positive)
         {
             return Err(SimError::invalid(what, "ego parameters must be positive"));
         }
         let t = &spec.traffic;
-        if ![t.length, t.width, t.accel, t.decel, t.emergency_decel, t.tau, t.headway, t.min_gap, t.idm_delta]
-            .into_iter()
-            .all(positive)
+        if ![
+            t.length,
+            t.width,
+            t.accel,
+            t.decel,
+            t.emergency_decel,
+            t.tau,
+            t.headway,
+            t.min_gap,
+            t.idm_delta,
+        ]
+        .into_iter()
+        .all(positive)
             || t.emergency_decel < t.decel
             || !(0.0..=1.0).contains(&t.sigma)
         {
@@ -287,20 +358,42 @@ impl Scenario {
             let path = Path::from_spec(&l.path, &format!("{what} lane {i}"))?;
             let speed_limit = l.speed_limit.unwrap_or(spec.speed_limit);
             let emission_per_s = l.emission_per_s.unwrap_or(spec.emission_per_s);
-            if !positive(speed_limit) || !(emission_per_s >= 0.0 && emission_per_s * spec.step_s <= 1.0) {
-                return Err(SimError::invalid(what, format!("lane {}: bad speed limit or emission", l.name)));
+            if !(positive(speed_limit)
+                && emission_per_s >= 0.0
+                && emission_per_s * spec.step_s <= 1.0)
+            {
+                return Err(SimError::invalid(
+                    what,
+                    format!("lane {}: bad speed limit or emission", l.name),
+                ));
             }
             let zone = conflict_zone(&ego_path, &spec.ego, &path, t.width);
-            lanes.push(Lane { name: l.name.clone(), path, speed_limit, emission_per_s, zone });
+            let straight = path.as_straight().map(|(p0, d)| (p0, d, d.y.atan2(d.x)));
+            lanes.push(Lane {
+                name: l.name.clone(),
+                path,
+                speed_limit,
+                emission_per_s,
+                zone,
+                straight,
+            });
         }
         if let Some(occ) = &spec.occlusion {
             occ.validate(what)?;
         }
         let fixed_obstacles = spec.obstacles.iter().map(ObstacleSpec::rect).collect();
-        let occlusion_channels =
-            spec.occlusion_channels.unwrap_or(spec.occlusion.is_some() || !spec.obstacles.is_empty());
+        let occlusion_channels = spec
+            .occlusion_channels
+            .unwrap_or(spec.occlusion.is_some() || !spec.obstacles.is_empty());
         let speed_profile = speed_profile(&ego_path, &spec.ego);
-        Ok(Self { spec, lanes, ego_path, fixed_obstacles, speed_profile, occlusion_channels })
+        Ok(Self {
+            spec,
+            lanes,
+            ego_path,
+            fixed_obstacles,
+            speed_profile,
+            occlusion_channels,
+        })
     }
 
     /// Name.
@@ -347,7 +440,10 @@ impl Scenario {
 }
 
 fn parse_spec(text: &str, what: &str) -> Result<ScenarioSpec, SimError> {
-    toml::from_str(text).map_err(|e| SimError::Parse { what: what.to_owned(), source: Box::new(e) })
+    toml::from_str(text).map_err(|e| SimError::Parse {
+        what: what.to_owned(),
+        source: Box::new(e),
+    })
 }
 
 /// The ego's footprint with its front bumper at arc length `s`.
@@ -356,7 +452,12 @@ pub(crate) fn ego_rect(path: &Path, params: &EgoParams, s: f64) -> OrientedRect 
     OrientedRect::new(pose.pos, pose.heading, params.length, params.width)
 }
 
-fn conflict_zone(ego_path: &Path, ego: &EgoSpec, lane: &Path, traffic_width: f64) -> Option<ConflictZone> {
+fn conflict_zone(
+    ego_path: &Path,
+    ego: &EgoSpec,
+    lane: &Path,
+    traffic_width: f64,
+) -> Option<ConflictZone> {
     let entry_len = ego.params.length;
     // A small margin so grazing contacts also count as conflicts.
     let half_band = 0.5 * traffic_width + 0.1;
@@ -453,7 +554,10 @@ mod tests {
         assert!(s.occlusion_channels());
         assert!(Scenario::builtin("occluded-x").is_err());
         assert!(Scenario::builtin("occluded-60-up").is_err());
-        assert!(matches!(Scenario::builtin("nope"), Err(SimError::UnknownScenario { .. })));
+        assert!(matches!(
+            Scenario::builtin("nope"),
+            Err(SimError::UnknownScenario { .. })
+        ));
     }
 
     #[test]
@@ -467,9 +571,15 @@ mod tests {
 
     #[test]
     fn bad_files_are_errors() {
-        assert!(matches!(Scenario::from_toml_str("name = 1", "x"), Err(SimError::Parse { .. })));
+        assert!(matches!(
+            Scenario::from_toml_str("name = 1", "x"),
+            Err(SimError::Parse { .. })
+        ));
         let mut spec = Scenario::builtin("left").unwrap().spec().clone();
         spec.ego.goal_s = 1.0;
-        assert!(matches!(Scenario::compile(spec), Err(SimError::Invalid { .. })));
+        assert!(matches!(
+            Scenario::compile(spec),
+            Err(SimError::Invalid { .. })
+        ));
     }
 }

@@ -16,5 +16,5 @@ pub fn episode_seed(base: u64, index: u64) -> u64 {
 
 /// Seed of the policy's random stream in trial `index`.
 pub fn policy_seed(base: u64, index: u64) -> u64 {
-    splitmix64(episode_seed(base, index) ^ 0x5EED_0F_F0_11C7)
+    splitmix64(episode_seed(base, index) ^ 0x5EED_0FF0_11C7)
 }

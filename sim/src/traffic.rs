@@ -96,7 +96,9 @@ impl Traffic {
     pub fn new(scenario: &Scenario) -> Self {
         let n = scenario.lanes().len();
         Self {
-            lanes: (0..n).map(|_| VecDeque::with_capacity(LANE_CAPACITY)).collect(),
+            lanes: (0..n)
+                .map(|_| VecDeque::with_capacity(LANE_CAPACITY))
+                .collect(),
             pending: vec![0; n],
             next_factor: vec![None; n],
             next_id: 0,
@@ -197,7 +199,11 @@ impl Traffic {
                     EgoFoe::Occupying { rear, v } if car.s < rear => {
                         a = a.min(idm_accel(car.v, car.v_desired, rear - car.s, v, p));
                     }
-                    EgoFoe::Entering { lane_in, lane_clear, t_enter } if car.s < lane_in => {
+                    EgoFoe::Entering {
+                        lane_in,
+                        lane_clear,
+                        t_enter,
+                    } if car.s < lane_in => {
                         if !car.yielding {
                             let t_clear = if car.v > 0.1 {
                                 (lane_clear + len - car.s) / car.v
@@ -205,8 +211,13 @@ impl Traffic {
                                 f64::INFINITY
                             };
                             let room = lane_in - car.s - HARD_GAP;
-                            let needed = if room > 0.0 { car.v * car.v / (2.0 * room) } else { f64::INFINITY };
-                            car.yielding = t_clear + p.yield_margin_s > t_enter && needed <= p.yield_decel;
+                            let needed = if room > 0.0 {
+                                car.v * car.v / (2.0 * room)
+                            } else {
+                                f64::INFINITY
+                            };
+                            car.yielding =
+                                t_clear + p.yield_margin_s > t_enter && needed <= p.yield_decel;
                         }
                         if car.yielding {
                             a = a.min(idm_accel(car.v, car.v_desired, lane_in - car.s, 0.0, p));
@@ -250,13 +261,25 @@ impl Traffic {
 
     /// Adds a car with its front at lane coordinate `s`, upstream of every
     /// car already in the lane.
-    pub fn place(&mut self, scenario: &Scenario, lane: usize, s: f64, v: f64) -> Result<(), SimError> {
+    pub fn place(
+        &mut self,
+        scenario: &Scenario,
+        lane: usize,
+        s: f64,
+        v: f64,
+    ) -> Result<(), SimError> {
         let Some(l) = scenario.lanes().get(lane) else {
-            return Err(SimError::invalid(scenario.name(), format!("no lane {lane}")));
+            return Err(SimError::invalid(
+                scenario.name(),
+                format!("no lane {lane}"),
+            ));
         };
         let length = scenario.spec().traffic.length;
         if self.lanes[lane].back().is_some_and(|c| c.s - length <= s) {
-            return Err(SimError::invalid(scenario.name(), "cars must be placed downstream first, without overlap"));
+            return Err(SimError::invalid(
+                scenario.name(),
+                "cars must be placed downstream first, without overlap",
+            ));
         }
         let mut car = Car {
             id: self.next_id,
@@ -293,7 +316,8 @@ impl Traffic {
         };
         let factor = *self.next_factor[li].get_or_insert_with(|| {
             let z: f64 = rng.sample(StandardNormal);
-            (p.speed_factor_mean + p.speed_factor_dev * z).clamp(p.speed_factor_min, p.speed_factor_max)
+            (p.speed_factor_mean + p.speed_factor_dev * z)
+                .clamp(p.speed_factor_min, p.speed_factor_max)
         });
         let v_desired = lane.speed_limit * factor;
         // Enter at the desired speed, no closer than IDM's desired gap for
@@ -329,10 +353,17 @@ impl Traffic {
 }
 
 fn place(car: &mut Car, lane: &crate::scenario::Lane, length: f64) {
-    let pose = lane.path.pose_at(car.s - 0.5 * length);
-    car.pos = pose.pos;
-    car.heading = pose.heading;
-    car.axis = Vec2::from_angle(pose.heading);
+    let centre = car.s - 0.5 * length;
+    if let Some((start, dir, heading)) = lane.straight {
+        car.pos = start + dir * centre;
+        car.axis = dir;
+        car.heading = heading;
+    } else {
+        let pose = lane.path.pose_at(centre);
+        car.pos = pose.pos;
+        car.heading = pose.heading;
+        car.axis = Vec2::from_angle(pose.heading);
+    }
 }
 
 #[cfg(test)]
@@ -387,7 +418,13 @@ mod tests {
         place(&mut car, lane, 5.0);
         t.lanes[0].push_back(car);
         // A stopped ego 100 m ahead of the car.
-        let foes = [EgoFoe::Occupying { rear: 150.0, v: 0.0 }, EgoFoe::None];
+        let foes = [
+            EgoFoe::Occupying {
+                rear: 150.0,
+                v: 0.0,
+            },
+            EgoFoe::None,
+        ];
         let mut braked = false;
         for _ in 0..200 {
             t.step(&s, &foes, &mut rng);
@@ -421,13 +458,21 @@ mod tests {
         place(&mut car, &s.lanes()[0], 5.0);
         t.lanes[0].push_back(car);
         // Needs (155 + 5 - 140) / 20 = 1 s to clear; the ego comes in 3 s.
-        let late = [EgoFoe::Entering { lane_in: 150.0, lane_clear: 155.0, t_enter: 3.0 }];
+        let late = [EgoFoe::Entering {
+            lane_in: 150.0,
+            lane_clear: 155.0,
+            t_enter: 3.0,
+        }];
         t.step(&s, &late, &mut rng);
         assert!(!t.lanes[0][0].braking);
         // Nearer, it needs 2 s to clear and the ego comes in 1.5 s: it brakes.
         t.lanes[0][0].s = 120.0;
         t.lanes[0][0].v = 20.0;
-        let soon = [EgoFoe::Entering { lane_in: 150.0, lane_clear: 155.0, t_enter: 1.5 }];
+        let soon = [EgoFoe::Entering {
+            lane_in: 150.0,
+            lane_clear: 155.0,
+            t_enter: 1.5,
+        }];
         t.step(&s, &soon, &mut rng);
         assert!(t.lanes[0][0].braking);
     }

@@ -65,7 +65,9 @@ pub fn tune_ttc(
 ) -> Result<TuneReport, SimError> {
     let mut ts: Vec<f64> = thresholds.to_vec();
     if ts.iter().any(|t| !(t.is_finite() && *t >= 0.0)) {
-        return Err(SimError::EvalConfig("thresholds must be finite and non-negative".to_owned()));
+        return Err(SimError::EvalConfig(
+            "thresholds must be finite and non-negative".to_owned(),
+        ));
     }
     ts.sort_by(f64::total_cmp);
     let config = EvalConfig::new(action_set, trials, seed);

@@ -33,7 +33,10 @@ fn idm_car_reaches_desired_speed_and_dawdles_below_it() {
         // From standstill IDM accelerates at nearly a = 2.6 m/s².
         t.step(&sc, &[], &mut rng);
         let v1 = t.lane(0)[0].v;
-        assert!(v1 > 2.6 * 0.2 * (1.0 - sigma) - 1e-9 && v1 <= 0.52 + 1e-9, "{v1}");
+        assert!(
+            v1 > 2.6 * 0.2 * (1.0 - sigma) - 1e-9 && v1 <= 0.52 + 1e-9,
+            "{v1}"
+        );
         // Then cruises; the desired speed of a placed car is its speed, so
         // reset it to 20 m/s.
         let mut speeds = Vec::new();
@@ -48,7 +51,10 @@ fn idm_car_reaches_desired_speed_and_dawdles_below_it() {
             }
         }
         let mean = speeds.iter().sum::<f64>() / speeds.len() as f64 / 20.0;
-        assert!(mean >= lo && mean <= hi, "sigma {sigma}: mean speed / v0 = {mean}");
+        assert!(
+            mean >= lo && mean <= hi,
+            "sigma {sigma}: mean speed / v0 = {mean}"
+        );
         assert_eq!(t.guard_hits(), 0);
     }
 }
@@ -60,7 +66,10 @@ fn idm_follower_stops_at_the_standstill_gap() {
     t.place(&sc, 0, 60.0, 15.0).unwrap();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
     // An obstacle (a stopped ego) at lane coordinate 130.
-    let foes = [EgoFoe::Occupying { rear: 130.0, v: 0.0 }];
+    let foes = [EgoFoe::Occupying {
+        rear: 130.0,
+        v: 0.0,
+    }];
     let mut min_gap = f64::INFINITY;
     for _ in 0..300 {
         t.step(&sc, &foes, &mut rng);
@@ -70,7 +79,10 @@ fn idm_follower_stops_at_the_standstill_gap() {
     assert!(c.v < 1e-6, "{c:?}");
     // IDM comes to rest about s0 = 2.5 m short, never closer than 1 m.
     let gap = 130.0 - c.s;
-    assert!((1.0..=3.5).contains(&gap) && min_gap >= 1.0, "gap {gap}, min {min_gap}");
+    assert!(
+        (1.0..=3.5).contains(&gap) && min_gap >= 1.0,
+        "gap {gap}, min {min_gap}"
+    );
 }
 
 #[test]
@@ -90,11 +102,18 @@ fn emission_rate_matches_the_configured_probability() {
         let expected = n * p;
         let sd = (n * p * (1.0 - p)).sqrt();
         let emitted = t.emissions() as f64;
-        assert!((emitted - expected).abs() < 4.0 * sd, "{name}: {emitted} emitted, expected {expected} +- {sd}");
+        assert!(
+            (emitted - expected).abs() < 4.0 * sd,
+            "{name}: {emitted} emitted, expected {expected} +- {sd}"
+        );
         let inserted = seen.len() as u64;
         assert_eq!(inserted, t.insertions());
         let per_lane_s = |k: f64| k / (f64::from(steps) * sc.dt()) / sc.lanes().len() as f64;
-        println!("{name}: emitted {:.4}, entered {:.4} cars per lane per second", per_lane_s(emitted), per_lane_s(inserted as f64));
+        println!(
+            "{name}: emitted {:.4}, entered {:.4} cars per lane per second",
+            per_lane_s(emitted),
+            per_lane_s(inserted as f64)
+        );
         if name != "challenge" {
             // Below capacity every emitted car gets in.
             assert!(t.emissions() - t.insertions() <= t.backlog() + 4, "{name}");
@@ -107,9 +126,17 @@ fn assert_no_traffic_overlap(env: &Env) {
     for lane in 0..env.scenario().lanes().len() {
         let cars = env.traffic().lane(lane);
         for pair in cars.iter().collect::<Vec<_>>().windows(2) {
-            let (a, b) = (pair[0].rect(tp.length, tp.width), pair[1].rect(tp.length, tp.width));
+            let (a, b) = (
+                pair[0].rect(tp.length, tp.width),
+                pair[1].rect(tp.length, tp.width),
+            );
             assert!(!a.overlaps(&b), "{:?} and {:?}", pair[0], pair[1]);
-            assert!(pair[0].s - tp.length > pair[1].s, "order {:?} {:?}", pair[0], pair[1]);
+            assert!(
+                pair[0].s - tp.length > pair[1].s,
+                "order {:?} {:?}",
+                pair[0],
+                pair[1]
+            );
         }
     }
 }
@@ -128,7 +155,9 @@ fn no_traffic_collisions_over_thousands_of_episodes() {
                 let mut steps = 0;
                 while !e.is_done() {
                     let mut a = [0];
-                    RandomPolicy.act(std::slice::from_ref(&e), &mut rngs, &mut a).unwrap();
+                    RandomPolicy
+                        .act(std::slice::from_ref(&e), &mut rngs, &mut a)
+                        .unwrap();
                     e.step(a[0]).unwrap();
                     steps += 1;
                     if steps % 2 == 0 {
@@ -158,7 +187,10 @@ fn traffic_brakes_for_a_go_but_not_in_occlusion_runs() {
     // The same scene with traffic that ignores the ego: a collision.
     let mut spec = e.scenario().spec().clone();
     spec.traffic_reacts = false;
-    let mut e = Env::new(Arc::new(Scenario::compile(spec).unwrap()), EnvConfig::for_actions(ActionSet::Ttg));
+    let mut e = Env::new(
+        Arc::new(Scenario::compile(spec).unwrap()),
+        EnvConfig::for_actions(ActionSet::Ttg),
+    );
     e.clear_traffic();
     e.place_car(0, z.lane_in - 45.0, 20.0).unwrap();
     let r = e.step(0).unwrap();
@@ -218,7 +250,11 @@ fn sequential_and_creep_dynamics() {
         assert!(c.ego().v <= 1.0 + 1e-9);
         assert!(c.ego().s <= limit + 1e-9);
     }
-    assert!(c.is_done() || (c.ego().s - limit).abs() < 1e-6, "{:?}", c.ego());
+    assert!(
+        c.is_done() || (c.ego().s - limit).abs() < 1e-6,
+        "{:?}",
+        c.ego()
+    );
 }
 
 #[test]
@@ -252,9 +288,15 @@ fn same_seed_same_episode() {
 #[test]
 fn evaluation_does_not_depend_on_thread_count() {
     let sc = scenario("left");
-    let config = EvalConfig { batch: 7, ..EvalConfig::new(ActionSet::Ttg, 300, 42) };
+    let config = EvalConfig {
+        batch: 7,
+        ..EvalConfig::new(ActionSet::Ttg, 300, 42)
+    };
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| evaluate(&sc, &RandomPolicy, &config, &|_| {}).unwrap())
     };
     let one = run(1);
@@ -264,7 +306,13 @@ fn evaluation_does_not_depend_on_thread_count() {
     let rates = one.success_rate + one.collision_rate + one.timeout_rate;
     assert!((rates - 1.0).abs() < 1e-12);
     // Another seed gives other numbers.
-    let other = evaluate(&sc, &RandomPolicy, &EvalConfig { seed: 43, ..config }, &|_| {}).unwrap();
+    let other = evaluate(
+        &sc,
+        &RandomPolicy,
+        &EvalConfig { seed: 43, ..config },
+        &|_| {},
+    )
+    .unwrap();
     assert_ne!(one, other);
     // Progress counts every trial.
     let done = std::sync::atomic::AtomicU64::new(0);
@@ -282,13 +330,25 @@ fn ttc_with_a_huge_threshold_never_collides() {
     for name in ["right", "left", "left2", "forward", "challenge"] {
         let sc = scenario(name);
         for set in ActionSet::ALL {
-            let r = evaluate(&sc, &TtcPolicy::new(1000.0, false), &EvalConfig::new(set, 200, 5), &|_| {}).unwrap();
+            let r = evaluate(
+                &sc,
+                &TtcPolicy::new(1000.0, false),
+                &EvalConfig::new(set, 200, 5),
+                &|_| {},
+            )
+            .unwrap();
             assert_eq!(r.collision_rate, 0.0, "{name} {set}: {r:?}");
         }
     }
     let occluded = scenario("occluded");
     let policy = parse_policy("ttc-creep:1000").unwrap();
-    let r = evaluate(&occluded, policy.as_ref(), &EvalConfig::new(ActionSet::Creep, 300, 5), &|_| {}).unwrap();
+    let r = evaluate(
+        &occluded,
+        policy.as_ref(),
+        &EvalConfig::new(ActionSet::Creep, 300, 5),
+        &|_| {},
+    )
+    .unwrap();
     // It never sees a road free of cars in the doubled traffic, so it times
     // out; the point is that it never goes into a car it cannot see.
     assert_eq!(r.collision_rate, 0.0, "{r:?}");
@@ -298,19 +358,38 @@ fn ttc_with_a_huge_threshold_never_collides() {
 fn ttc_creep_needs_a_creep_action() {
     let sc = scenario("occluded");
     let policy = parse_policy("ttc-creep:3").unwrap();
-    let err = evaluate(&sc, policy.as_ref(), &EvalConfig::new(ActionSet::Ttg, 10, 1), &|_| {});
+    let err = evaluate(
+        &sc,
+        policy.as_ref(),
+        &EvalConfig::new(ActionSet::Ttg, 10, 1),
+        &|_| {},
+    );
     assert!(matches!(err, Err(SimError::Unsupported { .. })));
 }
 
 #[test]
 fn tuning_sweeps_thresholds() {
     let sc = scenario("forward");
-    let t = tune_ttc(&sc, ActionSet::Ttg, false, &[3.0, 0.0, 1000.0], 100, 1, &|_| {}).unwrap();
+    let t = tune_ttc(
+        &sc,
+        ActionSet::Ttg,
+        false,
+        &[3.0, 0.0, 1000.0],
+        100,
+        1,
+        &|_| {},
+    )
+    .unwrap();
     let ts: Vec<f64> = t.sweep.iter().map(|p| p.threshold).collect();
     assert_eq!(ts, vec![0.0, 3.0, 1000.0]);
     let best = t.best.unwrap();
     assert_eq!(best.collision_rate, 0.0);
-    assert!(t.sweep.iter().take_while(|p| p.threshold < best.threshold).all(|p| p.collision_rate > 0.0));
+    assert!(
+        t.sweep
+            .iter()
+            .take_while(|p| p.threshold < best.threshold)
+            .all(|p| p.collision_rate > 0.0)
+    );
     // Higher thresholds wait longer.
     assert!(t.sweep[1].timeout_rate >= t.sweep[0].timeout_rate);
 }
@@ -327,7 +406,10 @@ fn ttg_observation_of_a_constructed_scene() {
     // Westbound car, front at 100: centre (52.5, 1.75): column 19, row 8.
     e.place_car(1, 100.0, 16.0).unwrap();
     let spec = e.obs_spec();
-    assert_eq!((spec.channels, spec.rows, spec.cols, spec.ego_features), (3, 18, 26, 4));
+    assert_eq!(
+        (spec.channels, spec.rows, spec.cols, spec.ego_features),
+        (3, 18, 26, 4)
+    );
     assert_eq!(spec.len(), 3 * 18 * 26 + 4);
     let mut obs = vec![f32::NAN; spec.len()];
     e.write_observation(&mut obs).unwrap();
@@ -344,7 +426,10 @@ fn ttg_observation_of_a_constructed_scene() {
     e.step(2).unwrap(); // wait 2
     e.write_observation(&mut obs).unwrap();
     assert!((obs[spec.grid_len() + 3] - 0.02).abs() < 1e-6);
-    assert!(matches!(e.write_observation(&mut [0.0; 3]), Err(SimError::BufferLength { .. })));
+    assert!(matches!(
+        e.write_observation(&mut [0.0; 3]),
+        Err(SimError::BufferLength { .. })
+    ));
 }
 
 #[test]
@@ -360,13 +445,19 @@ fn sequential_observation_of_a_constructed_scene() {
     // is 3.75 m ahead (row 0) and 34.25 m to the left:
     // column floor((90 - 34.25) / (180 / 11)) = 3.
     assert_eq!(obs[spec.index(0, 0, 3)], 1.0);
-    assert!((obs[spec.index(1, 0, 3)] - -0.5).abs() < 1e-6, "heading east relative to north");
+    assert!(
+        (obs[spec.index(1, 0, 3)] - -0.5).abs() < 1e-6,
+        "heading east relative to north"
+    );
     assert_eq!(obs[spec.index(2, 0, 3)], 0.5);
     let car = *e.traffic().cars().next().unwrap();
     let ttc = e.car_ttc(&car);
     assert!(ttc > 2.0 && ttc < 3.0, "{ttc}");
     assert!((f64::from(obs[spec.index(3, 0, 3)]) - ttc / 10.0).abs() < 1e-6);
-    assert_eq!(obs[..spec.grid_len()].iter().filter(|v| **v != 0.0).count(), 4);
+    assert_eq!(
+        obs[..spec.grid_len()].iter().filter(|v| **v != 0.0).count(),
+        4
+    );
 }
 
 #[test]
@@ -427,13 +518,23 @@ fn scenarios_load_from_user_files() {
     let loaded = Scenario::load(path.to_str().unwrap()).unwrap();
     assert_eq!(loaded.spec(), &spec);
     std::fs::write(&path, text.replace("step_limit", "step_limitt")).unwrap();
-    assert!(matches!(Scenario::load(path.to_str().unwrap()), Err(SimError::Parse { .. })));
-    assert!(matches!(Scenario::load("/nonexistent/x.toml"), Err(SimError::Io { .. })));
+    assert!(matches!(
+        Scenario::load(path.to_str().unwrap()),
+        Err(SimError::Parse { .. })
+    ));
+    assert!(matches!(
+        Scenario::load("/nonexistent/x.toml"),
+        Err(SimError::Io { .. })
+    ));
     std::fs::remove_dir_all(&dir).unwrap();
     // The shipped files are the embedded ones.
     for name in Scenario::builtin_names() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../configs/scenarios/{name}.toml"));
-        assert_eq!(Scenario::from_file(&file).unwrap().spec(), Scenario::builtin(name).unwrap().spec());
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join(format!("../configs/scenarios/{name}.toml"));
+        assert_eq!(
+            Scenario::from_file(&file).unwrap().spec(),
+            Scenario::builtin(name).unwrap().spec()
+        );
     }
 }
 

@@ -32,7 +32,12 @@ pub trait Policy: Send + Sync + std::fmt::Debug {
 
     /// Writes one action index per environment into `actions`. The three
     /// slices have equal lengths; every environment is running (not done).
-    fn act(&self, envs: &[Env], rngs: &mut [PolicyRng], actions: &mut [usize]) -> Result<(), SimError>;
+    fn act(
+        &self,
+        envs: &[Env],
+        rngs: &mut [PolicyRng],
+        actions: &mut [usize],
+    ) -> Result<(), SimError>;
 }
 
 /// A baseline policy as parsed from its string form.
@@ -63,14 +68,23 @@ impl std::str::FromStr for PolicySpec {
     type Err = SimError;
 
     fn from_str(s: &str) -> Result<Self, SimError> {
-        let err = |problem: &str| SimError::PolicySpec { spec: s.to_owned(), problem: problem.to_owned() };
+        let err = |problem: &str| SimError::PolicySpec {
+            spec: s.to_owned(),
+            problem: problem.to_owned(),
+        };
         if s == "random" {
             return Ok(Self::Random);
         }
-        let (kind, value) = s.split_once(':').ok_or_else(|| err("expected ttc:<seconds>, ttc-creep:<seconds> or random"))?;
-        let t: f64 = value.parse().map_err(|_| err("the threshold must be a number of seconds"))?;
+        let (kind, value) = s
+            .split_once(':')
+            .ok_or_else(|| err("expected ttc:<seconds>, ttc-creep:<seconds> or random"))?;
+        let t: f64 = value
+            .parse()
+            .map_err(|_| err("the threshold must be a number of seconds"))?;
         if !(t.is_finite() && t >= 0.0) {
-            return Err(err("the threshold must be a finite number of seconds, zero or more"));
+            return Err(err(
+                "the threshold must be a finite number of seconds, zero or more",
+            ));
         }
         match kind {
             "ttc" => Ok(Self::Ttc(t)),
@@ -101,8 +115,14 @@ mod tests {
 
     #[test]
     fn parses_policy_strings() {
-        assert_eq!("ttc:6.5".parse::<PolicySpec>().unwrap(), PolicySpec::Ttc(6.5));
-        assert_eq!("ttc-creep:3".parse::<PolicySpec>().unwrap(), PolicySpec::TtcCreep(3.0));
+        assert_eq!(
+            "ttc:6.5".parse::<PolicySpec>().unwrap(),
+            PolicySpec::Ttc(6.5)
+        );
+        assert_eq!(
+            "ttc-creep:3".parse::<PolicySpec>().unwrap(),
+            PolicySpec::TtcCreep(3.0)
+        );
         assert_eq!("random".parse::<PolicySpec>().unwrap(), PolicySpec::Random);
         for bad in ["ttc", "ttc:", "ttc:x", "ttc:-1", "ttc:inf", "dqn:3", ""] {
             assert!(bad.parse::<PolicySpec>().is_err(), "{bad}");

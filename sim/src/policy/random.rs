@@ -20,7 +20,12 @@ impl Policy for RandomPolicy {
         Ok(())
     }
 
-    fn act(&self, envs: &[Env], rngs: &mut [PolicyRng], actions: &mut [usize]) -> Result<(), SimError> {
+    fn act(
+        &self,
+        envs: &[Env],
+        rngs: &mut [PolicyRng],
+        actions: &mut [usize],
+    ) -> Result<(), SimError> {
         for ((env, rng), a) in envs.iter().zip(rngs.iter_mut()).zip(actions.iter_mut()) {
             *a = rng.random_range(0..env.config().action_set.num_actions());
         }

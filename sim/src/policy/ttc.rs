@@ -37,29 +37,48 @@ impl TtcPolicy {
                 return Intent::Creep;
             }
         }
-        if env.min_ttc(true) > self.threshold { Intent::Go } else { Intent::Wait }
+        if env.min_ttc(true) > self.threshold {
+            Intent::Go
+        } else {
+            Intent::Wait
+        }
     }
 }
 
 impl Policy for TtcPolicy {
     fn name(&self) -> String {
-        if self.creep { format!("ttc-creep:{}", self.threshold) } else { format!("ttc:{}", self.threshold) }
+        if self.creep {
+            format!("ttc-creep:{}", self.threshold)
+        } else {
+            format!("ttc:{}", self.threshold)
+        }
     }
 
     fn supports(&self, set: ActionSet) -> Result<(), SimError> {
         if self.creep && set == ActionSet::Ttg {
-            return Err(SimError::Unsupported { policy: self.name(), set: set.name() });
+            return Err(SimError::Unsupported {
+                policy: self.name(),
+                set: set.name(),
+            });
         }
         Ok(())
     }
 
-    fn act(&self, envs: &[Env], _rngs: &mut [PolicyRng], actions: &mut [usize]) -> Result<(), SimError> {
+    fn act(
+        &self,
+        envs: &[Env],
+        _rngs: &mut [PolicyRng],
+        actions: &mut [usize],
+    ) -> Result<(), SimError> {
         for (env, a) in envs.iter().zip(actions.iter_mut()) {
             let set = env.config().action_set;
             let p = &env.scenario().spec().ego.params;
             *a = set
                 .encode(self.intent(env), env.ego().v, p.creep_speed)
-                .ok_or_else(|| SimError::Unsupported { policy: self.name(), set: set.name() })?;
+                .ok_or_else(|| SimError::Unsupported {
+                    policy: self.name(),
+                    set: set.name(),
+                })?;
         }
         Ok(())
     }
