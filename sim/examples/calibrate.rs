@@ -16,7 +16,7 @@ fn main() -> Result<(), SimError> {
             .map(String::from)
             .to_vec();
     }
-    let thresholds: Vec<f64> = (0..=12).map(|i| f64::from(i) * 0.25).collect();
+    let thresholds: Vec<f64> = (0..=16).map(|i| f64::from(i) * 0.25).collect();
     for name in &names {
         let mut spec = Scenario::load(name)?.spec().clone();
         let env_f = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
@@ -28,6 +28,9 @@ fn main() -> Result<(), SimError> {
         }
         if let Some(v) = env_f("EGO_ACCEL") {
             spec.ego.params.accel = v;
+        }
+        if let Some(v) = env_f("LAT") {
+            spec.ego.params.lateral_accel = v;
         }
         if let Some(v) = env_f("HORIZON") {
             spec.traffic.yield_horizon_s = v;

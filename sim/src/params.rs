@@ -45,8 +45,9 @@ pub struct TrafficParams {
     pub yield_horizon_s: f64,
     /// Hardest braking a driver accepts to yield to an ego that is pulling
     /// out; a driver who would need more drives on, taking the right of
-    /// way (SUMO's junction model does the same). An ego already in the
-    /// lane ahead is braked for with `emergency_decel`. m/s².
+    /// way. An ego already in the lane ahead is always braked for, with up
+    /// to `emergency_decel`. Default: `emergency_decel`, as SUMO drivers
+    /// brake for a foe on the junction. m/s².
     pub yield_decel: f64,
     /// A car that would clear the ego's path at least this many seconds
     /// before the ego arrives does not yield.
@@ -86,7 +87,7 @@ impl Default for TrafficParams {
             speed_factor_min: 0.2,
             speed_factor_max: 2.0,
             yield_horizon_s: 6.0,
-            yield_decel: 7.5,
+            yield_decel: 9.0,
             yield_margin_s: 0.5,
             reaction_delay_s: 0.0,
             brake_threshold: 1.0,
@@ -125,7 +126,7 @@ impl Default for EgoParams {
             accel: 2.6,
             decel: 4.5,
             max_speed: 15.0,
-            lateral_accel: 3.0,
+            lateral_accel: 4.0,
             creep_speed: 1.0,
         }
     }
