@@ -57,6 +57,18 @@ fn main() -> Result<(), SimError> {
             );
         }
         println!("  best: {:?}", tune.best);
+        if let (true, Some(best)) = (creep, tune.best) {
+            let plain = crossroads_sim::TtcPolicy::new(best.threshold, false);
+            let r = evaluate(&sc, &plain, &EvalConfig::new(set, trials, 7), &|_| {})?;
+            println!(
+                "  ttc without creep at {}: succ {:.2} coll {:.2} tout {:.2} time {:?}",
+                best.threshold,
+                100.0 * r.success_rate,
+                100.0 * r.collision_rate,
+                100.0 * r.timeout_rate,
+                r.mean_time_s
+            );
+        }
         for set in [set, ActionSet::Sequential] {
             let r = evaluate(
                 &sc,
