@@ -16,7 +16,7 @@
 //! [`TtcPolicy`] (with or without creeping) and [`RandomPolicy`].
 //! [`evaluate`] runs seeded trials in parallel (same result on any number of
 //! threads) into an [`EvalReport`]; [`tune_ttc`] sweeps TTC thresholds;
-//! [`bench_scenario`] measures throughput.
+//! [`bench_scenario`] measures throughput; [`render_svg`] draws a state.
 //!
 //! # Frame and units
 //!
@@ -90,6 +90,7 @@ mod occlusion;
 mod params;
 mod path;
 mod policy;
+mod render;
 mod scenario;
 mod seed;
 mod traffic;
@@ -109,6 +110,7 @@ pub use occlusion::{ObstacleSpec, OcclusionLayout, OcclusionSpec, Side, line_of_
 pub use params::{EgoParams, Rewards, TrafficParams};
 pub use path::{Path, PathSpec, PieceSpec};
 pub use policy::{Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy};
+pub use render::{RenderView, render_svg};
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};
 pub use traffic::{Car, EgoFoe, Traffic};

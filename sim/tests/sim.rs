@@ -573,3 +573,24 @@ fn bench_reports_throughput() {
         "{b:?}"
     );
 }
+
+#[test]
+fn renders_svg() {
+    let mut e = env("occluded", ActionSet::Creep);
+    e.reset(4);
+    e.step(1).unwrap();
+    let svg = render_svg(&e, &RenderView::default());
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    // One polygon per car, per occluder, and the ego.
+    let polygons = svg.matches("<polygon").count();
+    assert_eq!(polygons, e.traffic().len() + e.occluders().len() + 1);
+    assert!(svg.contains("occluded step 1"));
+}
+
+#[test]
+fn env_is_send_and_sync() {
+    fn check<T: Send + Sync>() {}
+    check::<Env>();
+    check::<Scenario>();
+    check::<Box<dyn Policy>>();
+}
