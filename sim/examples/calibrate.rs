@@ -43,7 +43,9 @@ fn main() -> Result<(), SimError> {
             ActionSet::Ttg
         };
         let t0 = std::time::Instant::now();
-        let tune = tune_ttc(&sc, set, creep, &thresholds, trials, 7, &|_| {})?;
+        let long: Vec<f64> = (0..=24).map(|i| f64::from(i) * 0.25).collect();
+        let ts = if creep { &long } else { &thresholds };
+        let tune = tune_ttc(&sc, set, creep, ts, trials, 7, &|_| {})?;
         println!("== {name} ({:.1} s)", t0.elapsed().as_secs_f64());
         for p in &tune.sweep {
             println!(

@@ -8,7 +8,8 @@ use crate::error::SimError;
 /// Go when every car the ego sees will take longer than `threshold` seconds
 /// (at constant speed) to reach the ego's path. With `creep`, first creep
 /// until the conflicting lanes are visible far enough upstream (as far as a
-/// car at the speed limit covers in `threshold`), or until the creep limit.
+/// car at 1.5 times the speed limit covers in `threshold`, so fast cars are
+/// seen too), or until the creep limit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TtcPolicy {
     threshold: f64,
@@ -32,7 +33,7 @@ impl TtcPolicy {
             return Intent::Go;
         }
         if self.creep && ego.s < e.creep_limit_s - 0.05 {
-            let range = self.threshold * sc.spec().speed_limit;
+            let range = 1.5 * self.threshold * sc.spec().speed_limit;
             if !env.sees_conflicts(range) {
                 return Intent::Creep;
             }
