@@ -1,0 +1,112 @@
+//! The car-following laws of traffic: IDM acceleration, the Krauss safe
+//! speed and Krauss dawdling.
+
+use crate::params::TrafficParams;
+
+/// IDM acceleration (Treiber et al. 2000) of a car at speed `v` with desired
+/// speed `v0`, `gap` metres of free road to the next obstacle (bumper to
+/// bumper; infinite on a free road) that moves at `v_lead`.
+pub fn idm_accel(v: f64, v0: f64, gap: f64, v_lead: f64, p: &TrafficParams) -> f64 {
+    let r = v / v0.max(0.1);
+    // powf is slow; delta is 4 unless a scenario says otherwise.
+    let free = 1.0
+        - if p.idm_delta == 4.0 {
+            (r * r) * (r * r)
+        } else {
+            r.powf(p.idm_delta)
+        };
+    if !gap.is_finite() {
+        return p.accel * free;
+    }
+    if gap <= 0.0 {
+        return -p.emergency_decel;
+    }
+    let dv = v - v_lead;
+    let s_star = p.min_gap + (v * p.headway + v * dv / (2.0 * (p.accel * p.decel).sqrt())).max(0.0);
+    let ratio = s_star / gap;
+    p.accel * (free - ratio * ratio)
+}
+
+/// Krauss safe speed (SUMO): the fastest a follower may go so that it can
+/// still stop behind a leader `gap` metres ahead moving at `v_lead`, if the
+/// leader brakes at `decel`, with reaction time `tau`.
+pub fn krauss_safe_speed(gap: f64, v_lead: f64, tau: f64, decel: f64) -> f64 {
+    let tb = tau * decel;
+    let under = tb * tb + v_lead * v_lead + 2.0 * decel * gap.max(0.0);
+    (-tb + under.sqrt()).max(0.0)
+}
+
+/// Krauss dawdling: the speed after a random slowdown of up to
+/// `sigma * accel * dt`, given a uniform draw `u` in `[0, 1)`.
+pub fn dawdle(v: f64, u: f64, dt: f64, p: &TrafficParams) -> f64 {
+    (v - p.sigma * p.accel * dt * u).max(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p() -> TrafficParams {
+        TrafficParams {
+            headway: 1.0,
+            ..TrafficParams::default()
+        }
+    }
+
+    #[test]
+    fn idm_free_road() {
+        let p = p();
+        // At rest: full acceleration.
+        assert!((idm_accel(0.0, 20.0, f64::INFINITY, 0.0, &p) - 2.6).abs() < 1e-12);
+        // At the desired speed: none.
+        assert!(idm_accel(20.0, 20.0, f64::INFINITY, 0.0, &p).abs() < 1e-12);
+        // Half the desired speed: a (1 - 1/16).
+        assert!((idm_accel(10.0, 20.0, f64::INFINITY, 0.0, &p) - 2.6 * 15.0 / 16.0).abs() < 1e-12);
+        // Faster than desired: it slows down.
+        assert!(idm_accel(22.0, 20.0, f64::INFINITY, 0.0, &p) < 0.0);
+    }
+
+    #[test]
+    fn idm_interaction_term() {
+        let p = p();
+        // Standing still at exactly s0 behind a stopped car: balance.
+        assert!(idm_accel(0.0, 20.0, 2.5, 0.0, &p).abs() < 1e-12);
+        // At half of s0: a (1 - 4).
+        assert!((idm_accel(0.0, 20.0, 1.25, 0.0, &p) - -7.8).abs() < 1e-12);
+        // Hand-computed: v = 10, v0 = 20, gap 30, leader 5 m/s:
+        // s* = 2.5 + 10 + 10*5/(2 sqrt(2.6*4.5)) = 12.5 + 50/6.8411 = 19.8088
+        // a = 2.6 (1 - 1/16 - (19.8088/30)^2) = 1.3041
+        let a = idm_accel(10.0, 20.0, 30.0, 5.0, &p);
+        let s_star = 12.5 + 50.0 / (2.0 * (2.6_f64 * 4.5).sqrt());
+        let want = 2.6 * (1.0 - 1.0 / 16.0 - (s_star / 30.0).powi(2));
+        assert!((a - want).abs() < 1e-12 && (a - 1.3041).abs() < 1e-3, "{a}");
+        // Closing fast on a stopped obstacle: braking, harder when nearer.
+        let far = idm_accel(20.0, 20.0, 80.0, 0.0, &p);
+        let near = idm_accel(20.0, 20.0, 40.0, 0.0, &p);
+        assert!(far < 0.0 && near < far);
+        assert_eq!(idm_accel(5.0, 20.0, -1.0, 0.0, &p), -9.0);
+    }
+
+    #[test]
+    fn krauss_safe_speed_values() {
+        // No gap and a stopped leader: must stop.
+        assert_eq!(krauss_safe_speed(0.0, 0.0, 1.0, 4.5), 0.0);
+        // Hand-computed: gap 20, leader 10, tau 1, b 4.5:
+        // -4.5 + sqrt(20.25 + 100 + 180) = 12.8275
+        let v = krauss_safe_speed(20.0, 10.0, 1.0, 4.5);
+        assert!((v - (-4.5 + 300.25_f64.sqrt())).abs() < 1e-12);
+        // The follower at v_safe stops behind the leader's stopping point:
+        // v tau + v^2/(2b) <= gap + v_lead^2/(2b).
+        let lhs = v * 1.0 + v * v / 9.0;
+        assert!(lhs <= 20.0 + 100.0 / 9.0 + 1e-9);
+    }
+
+    #[test]
+    fn dawdling_bounds() {
+        let p = p();
+        assert_eq!(dawdle(10.0, 0.0, 0.2, &p), 10.0);
+        // u -> 1: slows by sigma * a * dt = 0.5 * 2.6 * 0.2 = 0.26 m/s.
+        assert!((dawdle(10.0, 0.999_999, 0.2, &p) - 9.74).abs() < 1e-5);
+        assert_eq!(dawdle(0.1, 0.9, 0.2, &p), 0.0);
+    }
+}

@@ -1,0 +1,263 @@
+//! Bird's-eye grid observations: their geometry, channels, normalization and
+//! writing into caller-provided buffers. The layout is documented on the
+//! crate root.
+
+use serde::{Deserialize, Serialize};
+
+use crate::env::{Env, TTC_CAP_S};
+use crate::error::SimError;
+use crate::geometry::{Vec2, wrap_angle};
+
+/// Rows of the TTG grid (north to south).
+pub const TTG_ROWS: usize = 18;
+/// Columns of the TTG grid (west to east).
+pub const TTG_COLS: usize = 26;
+/// West edge of the TTG grid, m.
+pub const TTG_X_MIN: f64 = -104.0;
+/// North edge of the TTG grid, m.
+pub const TTG_Y_MAX: f64 = 18.0;
+/// TTG cell size along x, m.
+pub const TTG_CELL_X: f64 = 8.0;
+/// TTG cell size along y, m.
+pub const TTG_CELL_Y: f64 = 2.0;
+/// Rows of the Sequential grid (nearest first).
+pub const SEQ_ROWS: usize = 5;
+/// Columns of the Sequential grid (left to right).
+pub const SEQ_COLS: usize = 11;
+/// Sequential cell size ahead, m (5 rows cover 0 to 20 m).
+pub const SEQ_CELL_FWD: f64 = 4.0;
+/// Half the lateral span of the Sequential grid, m.
+pub const SEQ_HALF_LAT: f64 = 90.0;
+/// Number of ego features after the grid.
+pub const EGO_FEATURES: usize = 4;
+
+/// Which grid an environment writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ObsKind {
+    /// 18 x 26 world-aligned grid around the intersection.
+    Ttg,
+    /// 5 x 11 grid in the ego's frame, with a time-to-collision channel.
+    Sequential,
+}
+
+/// Shape of an observation: a channel-major `channels x rows x cols` grid
+/// followed by [`EGO_FEATURES`] dense ego features.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct ObsSpec {
+    /// The grid.
+    pub kind: ObsKind,
+    /// Channels.
+    pub channels: usize,
+    /// Rows.
+    pub rows: usize,
+    /// Columns.
+    pub cols: usize,
+    /// Trailing dense ego features.
+    pub ego_features: usize,
+    /// Whether the last three grid channels are occluded, x offset, y offset.
+    pub occlusion: bool,
+}
+
+impl ObsSpec {
+    /// Length of the grid part.
+    pub fn grid_len(&self) -> usize {
+        self.channels * self.rows * self.cols
+    }
+
+    /// Length of the whole flat observation.
+    pub fn len(&self) -> usize {
+        self.grid_len() + self.ego_features
+    }
+
+    /// Never empty; here for clippy's `len` convention.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Flat index of grid value `(channel, row, col)`.
+    pub fn index(&self, channel: usize, row: usize, col: usize) -> usize {
+        (channel * self.rows + row) * self.cols + col
+    }
+}
+
+impl ObsKind {
+    /// The shape, with or without the occlusion channels.
+    pub fn spec(self, occlusion: bool) -> ObsSpec {
+        let extra = if occlusion { 3 } else { 0 };
+        let (channels, rows, cols) = match self {
+            Self::Ttg => (3 + extra, TTG_ROWS, TTG_COLS),
+            Self::Sequential => (4 + extra, SEQ_ROWS, SEQ_COLS),
+        };
+        ObsSpec {
+            kind: self,
+            channels,
+            rows,
+            cols,
+            ego_features: EGO_FEATURES,
+            occlusion,
+        }
+    }
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ttg => "ttg",
+            Self::Sequential => "sequential",
+        }
+    }
+}
+
+/// A grid's frame: cell of a world point, and world centre of a cell.
+#[derive(Clone, Copy)]
+struct Frame {
+    origin: Vec2,
+    /// Unit vector along which `u` grows (column axis for TTG, forward for
+    /// Sequential).
+    u: Vec2,
+    v: Vec2,
+    kind: ObsKind,
+}
+
+impl Frame {
+    fn of(env: &Env, kind: ObsKind) -> Self {
+        match kind {
+            ObsKind::Ttg => Self {
+                origin: Vec2::default(),
+                u: Vec2::new(1.0, 0.0),
+                v: Vec2::new(0.0, 1.0),
+                kind,
+            },
+            ObsKind::Sequential => {
+                let f = env.ego_rect.axis;
+                Self {
+                    origin: env.sensor,
+                    u: f,
+                    v: f.perp(),
+                    kind,
+                }
+            }
+        }
+    }
+
+    /// `(row, col, offset along rows' axis, offset along columns' axis)`,
+    /// offsets in cells from the cell centre, in `[-0.5, 0.5)`.
+    fn cell(&self, p: Vec2) -> Option<(usize, usize, f64, f64)> {
+        let d = p - self.origin;
+        let (a, b) = (d.dot(self.u), d.dot(self.v));
+        match self.kind {
+            ObsKind::Ttg => {
+                let c = (a - TTG_X_MIN) / TTG_CELL_X;
+                let r = (TTG_Y_MAX - b) / TTG_CELL_Y;
+                cell_of(r, c, TTG_ROWS, TTG_COLS)
+            }
+            ObsKind::Sequential => {
+                let r = a / SEQ_CELL_FWD;
+                let c = (SEQ_HALF_LAT - b) / (2.0 * SEQ_HALF_LAT / SEQ_COLS as f64);
+                cell_of(r, c, SEQ_ROWS, SEQ_COLS)
+            }
+        }
+    }
+
+    fn center(&self, row: usize, col: usize) -> Vec2 {
+        let (r, c) = (row as f64 + 0.5, col as f64 + 0.5);
+        let (a, b) = match self.kind {
+            ObsKind::Ttg => (TTG_X_MIN + c * TTG_CELL_X, TTG_Y_MAX - r * TTG_CELL_Y),
+            ObsKind::Sequential => (
+                r * SEQ_CELL_FWD,
+                SEQ_HALF_LAT - c * (2.0 * SEQ_HALF_LAT / SEQ_COLS as f64),
+            ),
+        };
+        self.origin + self.u * a + self.v * b
+    }
+}
+
+fn cell_of(r: f64, c: f64, rows: usize, cols: usize) -> Option<(usize, usize, f64, f64)> {
+    if !(r >= 0.0 && c >= 0.0 && r < rows as f64 && c < cols as f64) {
+        return None;
+    }
+    let (ri, ci) = (r.floor(), c.floor());
+    Some((ri as usize, ci as usize, r - ri - 0.5, c - ci - 0.5))
+}
+
+/// Recomputes which cells of the environment's grid the sensor sees.
+pub(crate) fn compute_visibility(env: &mut Env) {
+    let kind = env.config().observation;
+    let frame = Frame::of(env, kind);
+    let spec = kind.spec(true);
+    let sensor = env.sensor;
+    let mut vis = std::mem::take(&mut env.cell_visible);
+    let occluders = env.occluders();
+    vis.resize(spec.rows * spec.cols, true);
+    for row in 0..spec.rows {
+        for col in 0..spec.cols {
+            let p = frame.center(row, col);
+            vis[row * spec.cols + col] = occluders.iter().all(|o| !o.intersects_segment(sensor, p));
+        }
+    }
+    env.cell_visible = vis;
+}
+
+/// Writes `env`'s observation of kind `kind` into `out`.
+pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), SimError> {
+    let sc = env.scenario();
+    let spec = kind.spec(sc.occlusion_channels());
+    if out.len() != spec.len() {
+        return Err(SimError::BufferLength {
+            expected: spec.len(),
+            got: out.len(),
+        });
+    }
+    out.fill(0.0);
+    let frame = Frame::of(env, kind);
+    let cells = spec.rows * spec.cols;
+    let base = match kind {
+        ObsKind::Ttg => 3,
+        ObsKind::Sequential => 4,
+    };
+    if spec.occlusion {
+        let occ = &mut out[base * cells..(base + 1) * cells];
+        for (o, &v) in occ.iter_mut().zip(&env.cell_visible) {
+            *o = if v { 0.0 } else { 1.0 };
+        }
+    }
+    let limit = sc.spec().speed_limit;
+    let ego_heading = env.ego_rect.axis.y.atan2(env.ego_rect.axis.x);
+    for car in env.traffic().cars() {
+        let Some((row, col, dr, dc)) = frame.cell(car.pos) else {
+            continue;
+        };
+        let cell = row * spec.cols + col;
+        if spec.occlusion && !env.cell_visible[cell] {
+            continue;
+        }
+        let heading = match kind {
+            ObsKind::Ttg => wrap_angle(car.heading),
+            ObsKind::Sequential => wrap_angle(car.heading - ego_heading),
+        };
+        out[cell] = 1.0;
+        out[cells + cell] = (heading / std::f64::consts::PI) as f32;
+        out[2 * cells + cell] = (car.v / limit) as f32;
+        if kind == ObsKind::Sequential {
+            out[3 * cells + cell] = (env.car_ttc(car).min(TTC_CAP_S) / TTC_CAP_S) as f32;
+        }
+        if spec.occlusion {
+            // x offset along columns, y offset along rows, as in the docs.
+            let (dx, dy) = match kind {
+                ObsKind::Ttg => (dc, -dr),
+                ObsKind::Sequential => (dr, -dc),
+            };
+            out[(base + 1) * cells + cell] = dx as f32;
+            out[(base + 2) * cells + cell] = dy as f32;
+        }
+    }
+    let e = sc.spec();
+    let ego = env.ego();
+    let progress = (ego.s - e.ego.stop_line_s) / (e.ego.goal_s - e.ego.stop_line_s);
+    let tail = &mut out[spec.grid_len()..];
+    tail[0] = (ego.v / limit) as f32;
+    tail[1] = progress.clamp(0.0, 1.0) as f32;
+    tail[2] = if ego.committed { 1.0 } else { 0.0 };
+    tail[3] = (f64::from(env.steps()) / f64::from(e.step_limit)) as f32;
+    Ok(())
+}

@@ -1,0 +1,155 @@
+//! Tunable physical parameters of traffic, ego and rewards, with the paper's
+//! and SUMO's defaults. Every field can be overridden in a scenario file.
+
+use serde::{Deserialize, Serialize};
+
+/// Traffic vehicles: size, IDM car following, Krauss dawdling, desired
+/// speeds and how they react to the ego. Defaults are SUMO's passenger car.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrafficParams {
+    /// Car length, m.
+    pub length: f64,
+    /// Car width, m.
+    pub width: f64,
+    /// IDM maximum acceleration `a`, m/s².
+    pub accel: f64,
+    /// IDM comfortable deceleration `b`, m/s².
+    pub decel: f64,
+    /// Hardest physically possible braking, m/s².
+    pub emergency_decel: f64,
+    /// Krauss driver imperfection: each step speed drops by
+    /// `sigma * accel * dt * U[0,1)`.
+    pub sigma: f64,
+    /// Reaction time of the Krauss safe speed, s (SUMO's tau).
+    pub tau: f64,
+    /// IDM desired time headway `T`, s. Shorter than SUMO's tau because
+    /// IDM's free-road term widens gaps below the desired speed: behind a
+    /// platoon leader at 16.6 m/s a lane then carries about 0.6 cars/s
+    /// (0.45 with 1.0 s), still short of Challenge's demand of 0.7.
+    pub headway: f64,
+    /// IDM standstill gap `s0`, m (SUMO's minGap).
+    pub min_gap: f64,
+    /// IDM acceleration exponent `delta`.
+    pub idm_delta: f64,
+    /// Mean of the speed factor (desired speed = lane limit x factor).
+    pub speed_factor_mean: f64,
+    /// Standard deviation of the speed factor.
+    pub speed_factor_dev: f64,
+    /// Lower clip of the speed factor.
+    pub speed_factor_min: f64,
+    /// Upper clip of the speed factor.
+    pub speed_factor_max: f64,
+    /// A car starts yielding to an ego that is moving towards its lane when
+    /// the ego would reach the lane within this many seconds.
+    pub yield_horizon_s: f64,
+    /// Hardest braking a driver accepts to yield to an ego that is pulling
+    /// out; a driver who would need more drives on, taking the right of
+    /// way. An ego already in the lane ahead is always braked for, with up
+    /// to `emergency_decel`. Default: `emergency_decel`, as SUMO drivers
+    /// brake for a foe on the junction. m/s².
+    pub yield_decel: f64,
+    /// A car that would clear the ego's path at least this many seconds
+    /// before the ego arrives does not yield.
+    pub yield_margin_s: f64,
+    /// Seconds a driver needs to notice that the ego is pulling out before
+    /// braking for it; an ego already inside the lane is reacted to at once.
+    pub reaction_delay_s: f64,
+    /// A car counts as braking while its intended deceleration (car
+    /// following and reaction to the ego, before random dawdling) exceeds
+    /// this, m/s². Dawdling alone (at most `sigma * accel`) never counts.
+    pub brake_threshold: f64,
+    /// Braking counts only for cars whose centre is within this distance of
+    /// the origin (the intersection's centre in every built-in scenario), m.
+    /// Cars settling into the flow right after entering their lane, far
+    /// upstream, are not disturbed by the ego.
+    pub brake_zone: f64,
+    /// At most this many emissions wait for a blocked lane entrance (SUMO's
+    /// insertion backlog); more are dropped.
+    pub max_pending: u32,
+}
+
+impl Default for TrafficParams {
+    fn default() -> Self {
+        Self {
+            length: 5.0,
+            width: 1.8,
+            accel: 2.6,
+            decel: 4.5,
+            emergency_decel: 9.0,
+            sigma: 0.5,
+            tau: 1.0,
+            headway: 0.8,
+            min_gap: 2.5,
+            idm_delta: 4.0,
+            speed_factor_mean: 1.0,
+            speed_factor_dev: 0.1,
+            speed_factor_min: 0.2,
+            speed_factor_max: 2.0,
+            yield_horizon_s: 6.0,
+            yield_decel: 9.0,
+            yield_margin_s: 0.5,
+            reaction_delay_s: 0.0,
+            brake_threshold: 1.0,
+            brake_zone: 100.0,
+            max_pending: 64,
+        }
+    }
+}
+
+/// The ego vehicle: size and the dynamics behind each action.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EgoParams {
+    /// Length, m.
+    pub length: f64,
+    /// Width, m.
+    pub width: f64,
+    /// Acceleration of *go* and *accelerate*, m/s². SUMO's default, as the
+    /// ego is a car of the same type as traffic.
+    pub accel: f64,
+    /// Deceleration of *decelerate* and of stopping to wait, m/s².
+    pub decel: f64,
+    /// Top speed on the ego's path, m/s.
+    pub max_speed: f64,
+    /// Largest lateral acceleration in turns; sets the speed on arcs, m/s².
+    pub lateral_accel: f64,
+    /// Target speed of *creep*, m/s.
+    pub creep_speed: f64,
+}
+
+impl Default for EgoParams {
+    fn default() -> Self {
+        Self {
+            length: 5.0,
+            width: 1.8,
+            accel: 2.6,
+            decel: 4.5,
+            max_speed: 15.0,
+            lateral_accel: 4.0,
+            creep_speed: 1.0,
+        }
+    }
+}
+
+/// Rewards of the paper.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Rewards {
+    /// On reaching the goal.
+    pub success: f64,
+    /// On a collision.
+    pub collision: f64,
+    /// Every step, the terminal one included.
+    pub step: f64,
+}
+
+impl Default for Rewards {
+    fn default() -> Self {
+        Self {
+            success: 1.0,
+            collision: -10.0,
+            step: -0.01,
+        }
+    }
+}

@@ -1,0 +1,133 @@
+//! Policies that drive environments: the [`Policy`] trait, the baselines
+//! (TTC, TTC with creep, random) and parsing of policy strings.
+
+mod random;
+mod ttc;
+
+pub use random::RandomPolicy;
+pub use ttc::TtcPolicy;
+
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+use crate::action::ActionSet;
+use crate::env::Env;
+use crate::error::SimError;
+
+/// Random number generator handed to a policy, one per environment, so a
+/// stochastic policy's choices depend only on its episode's seed.
+pub type PolicyRng = Xoshiro256PlusPlus;
+
+/// Chooses actions for a batch of environments in one call, so a neural
+/// policy can run one batched forward pass for all of them.
+///
+/// Cost: the baselines are O(cars) per environment; a neural policy is one
+/// forward pass per call. Thread safety: `Send + Sync`; [`crate::evaluate`]
+/// calls `act` from several threads at once on disjoint batches.
+pub trait Policy: Send + Sync + std::fmt::Debug {
+    /// Name for reports, e.g. `ttc:6.5`.
+    fn name(&self) -> String;
+
+    /// Whether this policy can drive `set`; an error says why not.
+    fn supports(&self, set: ActionSet) -> Result<(), SimError>;
+
+    /// Writes one action index per environment into `actions`. The three
+    /// slices have equal lengths; every environment is running (not done).
+    fn act(
+        &self,
+        envs: &[Env],
+        rngs: &mut [PolicyRng],
+        actions: &mut [usize],
+    ) -> Result<(), SimError>;
+}
+
+/// A baseline policy as parsed from its string form.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PolicySpec {
+    /// `ttc:<seconds>`: go when every visible car's time to collision
+    /// exceeds the threshold.
+    Ttc(f64),
+    /// `ttc-creep:<seconds>`: creep until the conflicting lanes are in
+    /// view, then the TTC rule.
+    TtcCreep(f64),
+    /// `random`: uniform over the action set.
+    Random,
+}
+
+impl PolicySpec {
+    /// The policy.
+    pub fn build(self) -> Box<dyn Policy> {
+        match self {
+            Self::Ttc(t) => Box::new(TtcPolicy::new(t, false)),
+            Self::TtcCreep(t) => Box::new(TtcPolicy::new(t, true)),
+            Self::Random => Box::new(RandomPolicy),
+        }
+    }
+}
+
+impl std::str::FromStr for PolicySpec {
+    type Err = SimError;
+
+    fn from_str(s: &str) -> Result<Self, SimError> {
+        let err = |problem: &str| SimError::PolicySpec {
+            spec: s.to_owned(),
+            problem: problem.to_owned(),
+        };
+        if s == "random" {
+            return Ok(Self::Random);
+        }
+        let (kind, value) = s
+            .split_once(':')
+            .ok_or_else(|| err("expected ttc:<seconds>, ttc-creep:<seconds> or random"))?;
+        let t: f64 = value
+            .parse()
+            .map_err(|_| err("the threshold must be a number of seconds"))?;
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(err(
+                "the threshold must be a finite number of seconds, zero or more",
+            ));
+        }
+        match kind {
+            "ttc" => Ok(Self::Ttc(t)),
+            "ttc-creep" => Ok(Self::TtcCreep(t)),
+            _ => Err(err("expected ttc:<seconds>, ttc-creep:<seconds> or random")),
+        }
+    }
+}
+
+impl std::fmt::Display for PolicySpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Ttc(t) => write!(f, "ttc:{t}"),
+            Self::TtcCreep(t) => write!(f, "ttc-creep:{t}"),
+            Self::Random => f.write_str("random"),
+        }
+    }
+}
+
+/// Parses `ttc:<seconds>`, `ttc-creep:<seconds>` or `random` into a policy.
+pub fn parse_policy(s: &str) -> Result<Box<dyn Policy>, SimError> {
+    Ok(s.parse::<PolicySpec>()?.build())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_policy_strings() {
+        assert_eq!(
+            "ttc:6.5".parse::<PolicySpec>().unwrap(),
+            PolicySpec::Ttc(6.5)
+        );
+        assert_eq!(
+            "ttc-creep:3".parse::<PolicySpec>().unwrap(),
+            PolicySpec::TtcCreep(3.0)
+        );
+        assert_eq!("random".parse::<PolicySpec>().unwrap(), PolicySpec::Random);
+        for bad in ["ttc", "ttc:", "ttc:x", "ttc:-1", "ttc:inf", "dqn:3", ""] {
+            assert!(bad.parse::<PolicySpec>().is_err(), "{bad}");
+        }
+        assert_eq!(parse_policy("ttc:2").unwrap().name(), "ttc:2");
+        assert_eq!(PolicySpec::TtcCreep(1.5).to_string(), "ttc-creep:1.5");
+    }
+}

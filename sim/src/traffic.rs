@@ -1,0 +1,479 @@
+//! Traffic on the priority road: emission, IDM car following with Krauss
+//! safety and dawdling, and the reaction of drivers to the ego.
+
+use std::collections::VecDeque;
+
+use rand::RngExt;
+use rand_distr::StandardNormal;
+
+use crate::car_following::{dawdle, idm_accel, krauss_safe_speed};
+use crate::error::SimError;
+use crate::geometry::{OrientedRect, Vec2};
+use crate::scenario::Scenario;
+
+/// Bumper-to-bumper distance the Krauss bound keeps to a leader even in an
+/// emergency, m.
+const HARD_GAP: f64 = 0.5;
+/// Capacity reserved per lane, so stepping never allocates.
+const LANE_CAPACITY: usize = 64;
+
+/// One traffic car.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Car {
+    /// Unique within an episode.
+    pub id: u32,
+    /// Index of its lane in [`Scenario::lanes`].
+    pub lane: usize,
+    /// Lane coordinate of its front bumper, m.
+    pub s: f64,
+    /// Speed, m/s.
+    pub v: f64,
+    /// Desired speed: lane limit x speed factor, m/s.
+    pub v_desired: f64,
+    /// Whether it braked harder than the braking threshold this step.
+    pub braking: bool,
+    /// Whether it has decided to give way to the ego pulling out; kept
+    /// until the ego is in its lane or gone, so drivers do not dither.
+    pub yielding: bool,
+    /// Centre of the car in the world.
+    pub pos: Vec2,
+    /// Unit vector of its heading.
+    pub axis: Vec2,
+    /// Heading, radians counter-clockwise from east.
+    pub heading: f64,
+}
+
+impl Car {
+    /// Its footprint.
+    pub fn rect(&self, length: f64, width: f64) -> OrientedRect {
+        OrientedRect::with_axis(self.pos, self.axis, length, width)
+    }
+}
+
+/// What the cars of one lane know about the ego during a step.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub enum EgoFoe {
+    /// Nothing to react to.
+    #[default]
+    None,
+    /// The ego's footprint overlaps the lane: cars whose front is behind
+    /// `rear` follow it like a leader there, moving at `v` along the lane.
+    Occupying {
+        /// Smallest lane coordinate of the ego's footprint.
+        rear: f64,
+        /// Ego speed projected on the lane, never negative.
+        v: f64,
+    },
+    /// The ego is moving and reaches the lane in `t_enter` seconds. Cars
+    /// before `lane_in` that cannot get their rear past `lane_clear` well
+    /// before then stop at `lane_in`.
+    Entering {
+        /// Where the ego enters, lane coordinate.
+        lane_in: f64,
+        /// What a car's rear must pass to be clear.
+        lane_clear: f64,
+        /// Seconds until the ego enters.
+        t_enter: f64,
+    },
+}
+
+/// All traffic cars, lane by lane, downstream first.
+#[derive(Debug, Clone)]
+pub struct Traffic {
+    lanes: Vec<VecDeque<Car>>,
+    pending: Vec<u32>,
+    /// Speed factor of the car waiting to enter each lane, drawn once.
+    next_factor: Vec<Option<f64>>,
+    next_id: u32,
+    emissions: u64,
+    insertions: u64,
+    brake_time_s: f64,
+    guard_hits: u64,
+}
+
+impl Traffic {
+    /// Empty traffic for a scenario.
+    pub fn new(scenario: &Scenario) -> Self {
+        let n = scenario.lanes().len();
+        Self {
+            lanes: (0..n)
+                .map(|_| VecDeque::with_capacity(LANE_CAPACITY))
+                .collect(),
+            pending: vec![0; n],
+            next_factor: vec![None; n],
+            next_id: 0,
+            emissions: 0,
+            insertions: 0,
+            brake_time_s: 0.0,
+            guard_hits: 0,
+        }
+    }
+
+    /// Removes every car and clears the counters; keeps the memory.
+    pub fn clear(&mut self) {
+        self.lanes.iter_mut().for_each(VecDeque::clear);
+        self.pending.iter_mut().for_each(|p| *p = 0);
+        self.next_factor.iter_mut().for_each(|f| *f = None);
+        self.next_id = 0;
+        self.emissions = 0;
+        self.insertions = 0;
+        self.brake_time_s = 0.0;
+        self.guard_hits = 0;
+    }
+
+    /// Cars of lane `lane`, downstream first.
+    pub fn lane(&self, lane: usize) -> &VecDeque<Car> {
+        &self.lanes[lane]
+    }
+
+    /// Every car.
+    pub fn cars(&self) -> impl Iterator<Item = &Car> {
+        self.lanes.iter().flatten()
+    }
+
+    /// Number of cars.
+    pub fn len(&self) -> usize {
+        self.lanes.iter().map(VecDeque::len).sum()
+    }
+
+    /// Whether there are no cars.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Seconds of braking summed over cars since the last
+    /// [`Traffic::reset_counters`].
+    pub fn brake_time_s(&self) -> f64 {
+        self.brake_time_s
+    }
+
+    /// How often the last-resort spacing guard had to move a car back
+    /// because car following alone would have let it touch its leader.
+    /// Stays 0 unless the model is broken; tests check it.
+    pub fn guard_hits(&self) -> u64 {
+        self.guard_hits
+    }
+
+    /// Emission events (Bernoulli successes of the emission probability)
+    /// since [`Traffic::clear`].
+    pub fn emissions(&self) -> u64 {
+        self.emissions
+    }
+
+    /// Cars that entered their lane since [`Traffic::clear`]; lags
+    /// [`Traffic::emissions`] by the backlog of a blocked entrance.
+    pub fn insertions(&self) -> u64 {
+        self.insertions
+    }
+
+    /// Emissions waiting for their lane's entrance to clear.
+    pub fn backlog(&self) -> u64 {
+        self.pending.iter().map(|&p| u64::from(p)).sum()
+    }
+
+    /// Zeroes the braking time.
+    pub fn reset_counters(&mut self) {
+        self.brake_time_s = 0.0;
+    }
+
+    /// Advances every car by one step, then emits. `foes[i]` is what lane
+    /// `i` knows about the ego (missing entries mean nothing).
+    pub fn step(&mut self, scenario: &Scenario, foes: &[EgoFoe], rng: &mut impl rand::Rng) {
+        let p = &scenario.spec().traffic;
+        let dt = scenario.dt();
+        let len = p.length;
+        let brake_zone2 = p.brake_zone * p.brake_zone;
+        for (li, lane) in scenario.lanes().iter().enumerate() {
+            let foe = foes.get(li).copied().unwrap_or_default();
+            let cars = &mut self.lanes[li];
+            // Leader's state before this step, and its front after it.
+            let mut leader: Option<(f64, f64)> = None;
+            let mut leader_new_s = f64::INFINITY;
+            for car in cars.iter_mut() {
+                let (gap, v_lead) = match leader {
+                    Some((ls, lv)) => (ls - len - car.s, lv),
+                    None => (f64::INFINITY, 0.0),
+                };
+                let mut a = idm_accel(car.v, car.v_desired, gap, v_lead, p);
+                match foe {
+                    EgoFoe::Occupying { rear, v } if car.s < rear => {
+                        a = a.min(idm_accel(car.v, car.v_desired, rear - car.s, v, p));
+                    }
+                    EgoFoe::Entering {
+                        lane_in,
+                        lane_clear,
+                        t_enter,
+                    } if car.s < lane_in => {
+                        if !car.yielding {
+                            let t_clear = if car.v > 0.1 {
+                                (lane_clear + len - car.s) / car.v
+                            } else {
+                                f64::INFINITY
+                            };
+                            let room = lane_in - car.s - HARD_GAP;
+                            let needed = if room > 0.0 {
+                                car.v * car.v / (2.0 * room)
+                            } else {
+                                f64::INFINITY
+                            };
+                            car.yielding =
+                                t_clear + p.yield_margin_s > t_enter && needed <= p.yield_decel;
+                        }
+                        if car.yielding {
+                            a = a.min(idm_accel(car.v, car.v_desired, lane_in - car.s, 0.0, p));
+                        }
+                    }
+                    EgoFoe::None => car.yielding = false,
+                    _ => {}
+                }
+                let floor = (car.v - p.emergency_decel * dt).max(0.0);
+                let mut v_new = (car.v + a.max(-p.emergency_decel) * dt).max(0.0);
+                if leader.is_some() {
+                    // Krauss: never faster than what lets it stop behind a
+                    // leader braking as hard as possible; physics still caps
+                    // the braking.
+                    let safe = krauss_safe_speed(gap - HARD_GAP, v_lead, p.tau, p.emergency_decel);
+                    v_new = v_new.min(safe.max(floor));
+                }
+                car.braking = v_new - car.v < -p.brake_threshold * dt;
+                if car.braking && car.pos.dot(car.pos) <= brake_zone2 {
+                    self.brake_time_s += dt;
+                }
+                let v_new = dawdle(v_new, rng.random::<f64>(), dt, p);
+                leader = Some((car.s, car.v));
+                car.v = v_new;
+                car.s += v_new * dt;
+                // Last resort: never let a car into its leader.
+                let max_s = leader_new_s - len - 0.1 * HARD_GAP;
+                if car.s > max_s {
+                    car.s = max_s;
+                    self.guard_hits += 1;
+                }
+                leader_new_s = car.s;
+                place(car, lane, len);
+            }
+            while cars.front().is_some_and(|c| c.s - len > lane.path.length()) {
+                cars.pop_front();
+            }
+            self.emit(scenario, li, rng);
+        }
+    }
+
+    /// Adds a car with its front at lane coordinate `s`, upstream of every
+    /// car already in the lane.
+    pub fn place(
+        &mut self,
+        scenario: &Scenario,
+        lane: usize,
+        s: f64,
+        v: f64,
+    ) -> Result<(), SimError> {
+        let Some(l) = scenario.lanes().get(lane) else {
+            return Err(SimError::invalid(
+                scenario.name(),
+                format!("no lane {lane}"),
+            ));
+        };
+        let length = scenario.spec().traffic.length;
+        if self.lanes[lane].back().is_some_and(|c| c.s - length <= s) {
+            return Err(SimError::invalid(
+                scenario.name(),
+                "cars must be placed downstream first, without overlap",
+            ));
+        }
+        let mut car = Car {
+            id: self.next_id,
+            lane,
+            s,
+            v,
+            v_desired: v.max(0.1),
+            braking: false,
+            yielding: false,
+            pos: Vec2::default(),
+            axis: Vec2::default(),
+            heading: 0.0,
+        };
+        self.next_id = self.next_id.wrapping_add(1);
+        place(&mut car, l, length);
+        self.lanes[lane].push_back(car);
+        Ok(())
+    }
+
+    fn emit(&mut self, scenario: &Scenario, li: usize, rng: &mut impl rand::Rng) {
+        let p = &scenario.spec().traffic;
+        let lane = &scenario.lanes()[li];
+        if rng.random::<f64>() < lane.emission_per_s * scenario.dt() {
+            self.emissions += 1;
+            self.pending[li] = (self.pending[li] + 1).min(p.max_pending);
+        }
+        if self.pending[li] == 0 {
+            return;
+        }
+        let cars = &mut self.lanes[li];
+        let (gap, v_lead) = match cars.back() {
+            Some(last) => (last.s - p.length, last.v),
+            None => (f64::INFINITY, f64::INFINITY),
+        };
+        let factor = *self.next_factor[li].get_or_insert_with(|| {
+            let z: f64 = rng.sample(StandardNormal);
+            (p.speed_factor_mean + p.speed_factor_dev * z)
+                .clamp(p.speed_factor_min, p.speed_factor_max)
+        });
+        let v_desired = lane.speed_limit * factor;
+        // Enter at the desired speed, no closer than IDM's desired gap for
+        // it; until then the emission waits, as SUMO's insertion backlog
+        // does. Entering slower is not allowed: a slow entrance turns into
+        // a jam whose discharge is below Challenge's demand, and it never
+        // clears.
+        let k = 1.0 / (2.0 * (p.accel * p.decel).sqrt());
+        let v = v_desired;
+        let s_star = p.min_gap + (v * p.headway + v * (v - v_lead.min(v)) * k);
+        if gap < s_star {
+            return;
+        }
+        self.pending[li] -= 1;
+        self.next_factor[li] = None;
+        self.insertions += 1;
+        let mut car = Car {
+            id: self.next_id,
+            lane: li,
+            s: 0.0,
+            v,
+            v_desired,
+            braking: false,
+            yielding: false,
+            pos: Vec2::default(),
+            axis: Vec2::default(),
+            heading: 0.0,
+        };
+        self.next_id = self.next_id.wrapping_add(1);
+        place(&mut car, lane, p.length);
+        cars.push_back(car);
+    }
+}
+
+fn place(car: &mut Car, lane: &crate::scenario::Lane, length: f64) {
+    let centre = car.s - 0.5 * length;
+    if let Some((start, dir, heading)) = lane.straight {
+        car.pos = start + dir * centre;
+        car.axis = dir;
+        car.heading = heading;
+    } else {
+        let pose = lane.path.pose_at(centre);
+        car.pos = pose.pos;
+        car.heading = pose.heading;
+        car.axis = Vec2::from_angle(pose.heading);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    use super::*;
+
+    fn run(scenario: &Scenario, seconds: f64, seed: u64) -> Traffic {
+        let mut t = Traffic::new(scenario);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let steps = (seconds / scenario.dt()) as usize;
+        for _ in 0..steps {
+            t.step(scenario, &[], &mut rng);
+        }
+        t
+    }
+
+    #[test]
+    fn free_flow_speeds_follow_the_speed_factor() {
+        let s = Scenario::builtin("challenge").unwrap();
+        let t = run(&s, 60.0, 1);
+        let n = t.len();
+        assert!(n > 20, "{n}");
+        for c in t.cars() {
+            assert!((10.0..=30.0).contains(&c.v_desired), "{c:?}");
+            assert!(c.v <= c.v_desired + 1e-9);
+        }
+        let mean_factor = t.cars().map(|c| c.v_desired / 20.0).sum::<f64>() / n as f64;
+        assert!((mean_factor - 1.0).abs() < 0.05, "{mean_factor}");
+    }
+
+    #[test]
+    fn cars_stop_behind_an_ego_in_their_lane() {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut t = Traffic::new(&s);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let lane = &s.lanes()[0];
+        let mut car = Car {
+            id: 0,
+            lane: 0,
+            s: 50.0,
+            v: 20.0,
+            v_desired: 20.0,
+            braking: false,
+            yielding: false,
+            pos: Vec2::default(),
+            axis: Vec2::default(),
+            heading: 0.0,
+        };
+        place(&mut car, lane, 5.0);
+        t.lanes[0].push_back(car);
+        // A stopped ego 100 m ahead of the car.
+        let foes = [
+            EgoFoe::Occupying {
+                rear: 150.0,
+                v: 0.0,
+            },
+            EgoFoe::None,
+        ];
+        let mut braked = false;
+        for _ in 0..200 {
+            t.step(&s, &foes, &mut rng);
+            let c = t.lanes[0].iter().find(|c| c.id == 0).unwrap();
+            braked |= c.braking;
+            assert!(c.s < 150.0, "{c:?}");
+        }
+        let c = t.lanes[0].iter().find(|c| c.id == 0).unwrap();
+        assert!(c.v < 0.05 && c.s > 140.0, "{c:?}");
+        assert!(braked && t.brake_time_s() > 0.0);
+        assert_eq!(t.guard_hits(), 0);
+    }
+
+    #[test]
+    fn cars_that_clear_in_time_do_not_yield() {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut t = Traffic::new(&s);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let mut car = Car {
+            id: 0,
+            lane: 0,
+            s: 140.0,
+            v: 20.0,
+            v_desired: 20.0,
+            braking: false,
+            yielding: false,
+            pos: Vec2::default(),
+            axis: Vec2::default(),
+            heading: 0.0,
+        };
+        place(&mut car, &s.lanes()[0], 5.0);
+        t.lanes[0].push_back(car);
+        // Needs (155 + 5 - 140) / 20 = 1 s to clear; the ego comes in 3 s.
+        let late = [EgoFoe::Entering {
+            lane_in: 150.0,
+            lane_clear: 155.0,
+            t_enter: 3.0,
+        }];
+        t.step(&s, &late, &mut rng);
+        assert!(!t.lanes[0][0].braking);
+        // Nearer, it needs 2 s to clear and the ego comes in 1.5 s: it brakes.
+        t.lanes[0][0].s = 120.0;
+        t.lanes[0][0].v = 20.0;
+        let soon = [EgoFoe::Entering {
+            lane_in: 150.0,
+            lane_clear: 155.0,
+            t_enter: 1.5,
+        }];
+        t.step(&s, &soon, &mut rng);
+        assert!(t.lanes[0][0].braking);
+    }
+}
