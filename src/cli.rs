@@ -2,8 +2,9 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use crossroads_common::ConfigLoader;
+use crossroads_sim::ActionSet;
 
 /// Learns to drive through unsignalized and occluded intersections with
 /// distributed deep reinforcement learning (actors, prioritized replay, a
@@ -53,6 +54,94 @@ pub enum Command {
     Config(ConfigArgs),
     /// Check this machine: libtorch, threads, and a timed forward pass.
     Doctor(DoctorArgs),
+    /// Evaluate a policy on a scenario over seeded trials: success,
+    /// collision and timeout rates, mean time and braking, with 95 %
+    /// intervals.
+    Eval(EvalArgs),
+    /// Sweep TTC thresholds on a scenario and find the lowest one with zero
+    /// collisions (the paper's tuning rule); CSV and PNG with --out.
+    TuneTtc(TuneTtcArgs),
+    /// Measure throughput on this machine and print the figures.
+    Bench(BenchArgs),
+}
+
+/// `crossroads eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Policy: ttc:<seconds>, ttc-creep:<seconds> or random.
+    #[arg(long, short = 'p')]
+    pub policy: String,
+    /// Scenario: right, left, left2, forward, challenge, occluded,
+    /// occluded-<30|60|90>[-left|-right|-both], or a scenario TOML file.
+    #[arg(long, default_value = "left")]
+    pub scenario: String,
+    /// Action set the policy drives.
+    #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
+    pub actions: ActionSet,
+    /// Number of trials.
+    #[arg(long, short = 'n', default_value_t = 10_000)]
+    pub trials: u64,
+    /// Base seed; the same seed gives the same result on any number of
+    /// threads.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object (rates as fractions) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `crossroads tune-ttc`.
+#[derive(Debug, Args)]
+pub struct TuneTtcArgs {
+    /// Scenario name or scenario TOML file.
+    #[arg(long, default_value = "left")]
+    pub scenario: String,
+    /// Action set the TTC rule drives.
+    #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
+    pub actions: ActionSet,
+    /// Creep until the conflicting lanes are visible, then apply the rule
+    /// (TTC with creep, for occlusion scenarios).
+    #[arg(long)]
+    pub creep: bool,
+    /// Trials per threshold.
+    #[arg(long, short = 'n', default_value_t = 2_000)]
+    pub trials: u64,
+    /// Base seed, the same for every threshold.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Thresholds in seconds: start:end:step or a comma-separated list
+    /// [default: 0:10:0.25].
+    #[arg(long)]
+    pub thresholds: Option<String>,
+    /// Folder for tune-ttc[-creep]-<scenario>.csv and .png.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// `crossroads bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// What to measure.
+    #[arg(value_enum)]
+    pub target: BenchTarget,
+    /// Least time per measurement, in seconds.
+    #[arg(long, default_value_t = 1.0)]
+    pub seconds: f64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Benchmarks `crossroads bench` runs.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum BenchTarget {
+    /// Simulator: TTG decisions/s with observations and traffic steps/s per
+    /// core, for each built-in scenario.
+    Sim,
+}
+
+fn parse_action_set(s: &str) -> Result<ActionSet, String> {
+    s.parse::<ActionSet>().map_err(|e| e.to_string())
 }
 
 /// `crossroads config`.

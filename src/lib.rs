@@ -7,6 +7,8 @@
 
 pub mod cli;
 pub mod commands;
+pub mod plot;
+pub mod progress;
 
 use std::process::ExitCode;
 
@@ -21,8 +23,17 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         .load()
         .context("loading configuration")?;
     crossroads_common::telemetry::init_tracing(config.telemetry.log_format)?;
+    if config.runtime.compute_threads > 0 {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(config.runtime.compute_threads)
+            .build_global()
+            .context("starting the compute thread pool")?;
+    }
     match cli.command {
         Command::Config(args) => commands::config::run(&cli.global, &config, &args),
         Command::Doctor(args) => commands::doctor::run(&config, &args),
+        Command::Eval(args) => commands::eval::run(&args),
+        Command::TuneTtc(args) => commands::tune_ttc::run(&args),
+        Command::Bench(args) => commands::bench::run(&args),
     }
 }

@@ -1,4 +1,7 @@
 //! One module per subcommand.
 
+pub mod bench;
 pub mod config;
 pub mod doctor;
+pub mod eval;
+pub mod tune_ttc;

@@ -3,3 +3,4 @@
 
 mod cli;
 mod setup_libtorch;
+mod sim_commands;

@@ -1,0 +1,120 @@
+//! `crossroads eval`: a policy on a scenario for N seeded trials.
+
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use anyhow::Context;
+use crossroads_sim::{EvalConfig, EvalReport, Interval, Scenario, evaluate, parse_policy};
+use serde::Serialize;
+
+use crate::cli::EvalArgs;
+use crate::progress;
+
+/// What `--json` prints: the issue's fields first, then the intervals.
+#[derive(Debug, Serialize)]
+struct JsonReport<'a> {
+    scenario: &'a str,
+    policy: &'a str,
+    actions: &'a str,
+    trials: u64,
+    seed: u64,
+    success_rate: f64,
+    collision_rate: f64,
+    timeout_rate: f64,
+    mean_time_s: Option<f64>,
+    mean_brake_s: f64,
+    success_ci95: Interval,
+    collision_ci95: Interval,
+    timeout_ci95: Interval,
+    mean_time_ci95: Option<Interval>,
+    mean_brake_ci95: Interval,
+    wall_seconds: f64,
+}
+
+/// Runs the evaluation and prints the report.
+pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
+    let scenario = Arc::new(
+        Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
+    );
+    let policy = parse_policy(&args.policy).context("--policy")?;
+    policy.supports(args.actions).with_context(|| {
+        format!(
+            "--policy {} with --actions {}",
+            args.policy,
+            args.actions.name()
+        )
+    })?;
+    anyhow::ensure!(args.trials > 0, "--trials must be at least 1");
+    let config = EvalConfig::new(args.actions, args.trials, args.seed);
+
+    let bar = progress::bar(args.trials, "trials");
+    bar.set_message(format!("{} on {}", policy.name(), scenario.name()));
+    let start = std::time::Instant::now();
+    let report = evaluate(&scenario, policy.as_ref(), &config, &|n| bar.inc(n))?;
+    let wall = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+
+    if args.json {
+        println!("{}", serde_json::to_string(&json(&report, wall))?);
+    } else {
+        print!("{}", text(&report, wall));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn json(r: &EvalReport, wall_seconds: f64) -> JsonReport<'_> {
+    JsonReport {
+        scenario: &r.scenario,
+        policy: &r.policy,
+        actions: &r.action_set,
+        trials: r.trials,
+        seed: r.seed,
+        success_rate: r.success_rate,
+        collision_rate: r.collision_rate,
+        timeout_rate: r.timeout_rate,
+        mean_time_s: r.mean_time_s,
+        mean_brake_s: r.mean_brake_s,
+        success_ci95: r.success_ci,
+        collision_ci95: r.collision_ci,
+        timeout_ci95: r.timeout_ci,
+        mean_time_ci95: r.mean_time_ci,
+        mean_brake_ci95: r.mean_brake_ci,
+        wall_seconds,
+    }
+}
+
+/// The human-readable report.
+pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
+    let pct = |v: f64, ci: &Interval| {
+        format!(
+            "{:7.2} %   [{:.2}, {:.2}]",
+            100.0 * v,
+            100.0 * ci.low,
+            100.0 * ci.high
+        )
+    };
+    let secs = |v: f64, ci: &Interval| format!("{v:7.2} s   [{:.2}, {:.2}]", ci.low, ci.high);
+    let time = match (r.mean_time_s, &r.mean_time_ci) {
+        (Some(t), Some(ci)) => secs(t, ci),
+        _ => "      -     (no successful run)".to_owned(),
+    };
+    format!(
+        "{policy} on {scenario} ({actions} actions), {trials} trials, seed {seed}, {wall:.2} s\n\
+         \x20                  value      95 % interval\n\
+         \x20 success      {s}\n\
+         \x20 collision    {c}\n\
+         \x20 timeout      {t}\n\
+         \x20 mean time    {time}   (successful runs)\n\
+         \x20 mean brake   {b}   (traffic braking per run)\n",
+        policy = r.policy,
+        scenario = r.scenario,
+        actions = r.action_set,
+        trials = r.trials,
+        seed = r.seed,
+        wall = wall_seconds,
+        s = pct(r.success_rate, &r.success_ci),
+        c = pct(r.collision_rate, &r.collision_ci),
+        t = pct(r.timeout_rate, &r.timeout_ci),
+        b = secs(r.mean_brake_s, &r.mean_brake_ci),
+    )
+}
