@@ -53,6 +53,11 @@ pub enum Command {
     Config(ConfigArgs),
     /// Check this machine: libtorch, threads, and a timed forward pass.
     Doctor(DoctorArgs),
+    /// Run the prioritized replay server: actors insert over gRPC or shared
+    /// memory, the learner samples and updates priorities over gRPC.
+    Replay(ReplayArgs),
+    /// Measure throughput and memory of a component.
+    Bench(BenchArgs),
 }
 
 /// `crossroads config`.
@@ -78,4 +83,77 @@ pub struct DoctorArgs {
     /// Print the report as one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `crossroads replay`. Each flag overrides the `[replay]` key of the same
+/// name from the file, the environment and --set.
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// gRPC address to serve on (replay.listen); port 0 picks a free port.
+    #[arg(long, value_name = "ADDR")]
+    pub listen: Option<std::net::SocketAddr>,
+    /// Directory for snapshots, restored at start (replay.snapshot_dir).
+    #[arg(long, value_name = "DIR")]
+    pub snapshot_dir: Option<PathBuf>,
+    /// Items the table holds before evicting the oldest (replay.capacity).
+    #[arg(long, value_name = "N")]
+    pub capacity: Option<u64>,
+    /// Name of the table (replay.table).
+    #[arg(long, value_name = "NAME")]
+    pub table: Option<String>,
+    /// Do not take batches over iceoryx2 shared memory (replay.shm_ingest).
+    #[arg(long)]
+    pub no_shm: bool,
+    /// Start empty even if snapshots exist (replay.restore = false).
+    #[arg(long)]
+    pub no_restore: bool,
+}
+
+impl ReplayArgs {
+    /// Layers these flags over `loader`.
+    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
+        if let Some(v) = self.listen {
+            loader = loader.flag("replay.listen", v.to_string());
+        }
+        if let Some(v) = &self.snapshot_dir {
+            loader = loader.flag("replay.snapshot_dir", v);
+        }
+        if let Some(v) = self.capacity {
+            loader = loader.flag("replay.capacity", v);
+        }
+        if let Some(v) = &self.table {
+            loader = loader.flag("replay.table", v);
+        }
+        if self.no_shm {
+            loader = loader.flag("replay.shm_ingest", false);
+        }
+        if self.no_restore {
+            loader = loader.flag("replay.restore", false);
+        }
+        loader
+    }
+}
+
+/// `crossroads bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub target: BenchTarget,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum BenchTarget {
+    /// Replay table: bytes per stored transition, inserts/s and samples/s
+    /// on synthetic TTG episodes (medians over rounds).
+    Replay {
+        /// Table capacity, filled before timing.
+        #[arg(long, default_value_t = 262_144)]
+        capacity: usize,
+        /// Timed rounds; the median is reported.
+        #[arg(long, default_value_t = 11)]
+        rounds: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
 }

@@ -15,14 +15,16 @@ use cli::{Cli, Command};
 
 /// Runs one parsed command line to completion.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    let config = cli
-        .global
-        .loader()
-        .load()
-        .context("loading configuration")?;
+    let loader = match &cli.command {
+        Command::Replay(args) => args.apply(cli.global.loader()),
+        _ => cli.global.loader(),
+    };
+    let config = loader.load().context("loading configuration")?;
     crossroads_common::telemetry::init_tracing(config.telemetry.log_format)?;
     match cli.command {
         Command::Config(args) => commands::config::run(&cli.global, &config, &args),
         Command::Doctor(args) => commands::doctor::run(&config, &args),
+        Command::Replay(_) => commands::replay::run(&config),
+        Command::Bench(args) => commands::bench::run(&args),
     }
 }

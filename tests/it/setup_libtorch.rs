@@ -28,9 +28,15 @@ fn checksum_mismatch_fails_clearly_and_moves_the_wheel_aside() {
     assert!(!out.status.success(), "a corrupt wheel must fail: {stderr}");
     assert!(stderr.contains("checksum mismatch"), "{stderr}");
     assert!(stderr.contains(wheel), "names the wheel: {stderr}");
-    assert!(stderr.contains(recorded), "shows the expected sum: {stderr}");
+    assert!(
+        stderr.contains(recorded),
+        "shows the expected sum: {stderr}"
+    );
     assert!(!dest.exists(), "nothing assembled from a bad wheel");
-    assert!(!cache.join(wheel).exists(), "bad wheel moved out of the way");
+    assert!(
+        !cache.join(wheel).exists(),
+        "bad wheel moved out of the way"
+    );
     assert!(cache.join(format!("{wheel}.bad")).exists());
 }
 
@@ -43,11 +49,19 @@ fn assembled_libtorch_is_reused() {
         eprintln!("skipped: LIBTORCH points elsewhere");
         return;
     }
-    let out = Command::new("bash").arg(SCRIPT).output().expect("run the script");
+    let out = Command::new("bash")
+        .arg(SCRIPT)
+        .output()
+        .expect("run the script");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("already assembled"), "{stderr}");
-    for lib in ["libtorch.so", "libtorch_cpu.so", "libc10.so", "libgomp.so.1"] {
+    for lib in [
+        "libtorch.so",
+        "libtorch_cpu.so",
+        "libc10.so",
+        "libgomp.so.1",
+    ] {
         assert!(libtorch.join("lib").join(lib).exists(), "{lib} missing");
     }
 }
