@@ -7,8 +7,9 @@
 //! released before the insert, which waits for the rate limiter without
 //! dropping the batch: while it waits the queue fills and publishers feel
 //! the back-pressure (their sends time out), rather than batches being lost
-//! here. At shutdown the queue is drained into the tables, whatever the
-//! rate limiter says, before the server's last snapshot.
+//! here. Every batch is answered on `<prefix>/replay/<table>/acks` once
+//! stored or rejected. At shutdown the queue is drained into the tables,
+//! whatever the rate limiter says, before the server's last snapshot.
 
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -59,7 +60,18 @@ impl ShmIngest {
                             .buffer_size(config.shm_buffer)
                             .create()
                             .map_err(|e| ShmError::iceoryx("creating subscriber", e))?;
-                        subscribers.push((table.clone(), subscriber, service));
+                        let ack_service = shm::open_ack_service(&node, &config, name)?;
+                        let acks = ack_service
+                            .publisher_builder()
+                            .create()
+                            .map_err(|e| ShmError::iceoryx("creating ack publisher", e))?;
+                        subscribers.push(Port {
+                            table: table.clone(),
+                            subscriber,
+                            acks,
+                            _service: service,
+                            _ack_service: ack_service,
+                        });
                     }
                     Ok((node, subscribers))
                 };
@@ -73,14 +85,20 @@ impl ShmIngest {
                         return;
                     }
                 };
-                let receive = |table: &Arc<Table>, sub: &Sub, draining: bool| -> bool {
-                    match sub.receive() {
+                let receive = |port: &Port, draining: bool| -> bool {
+                    match port.subscriber.receive() {
                         Ok(Some(sample)) => {
                             let read = shm::read_frame(sample.user_header(), sample.payload());
+                            let origin = sample.origin().value();
+                            let batch_id = sample.user_header().batch_id;
                             // The shared-memory slot goes back to the
                             // publisher before the insert may wait.
                             drop(sample);
-                            handle(&state, &runtime, table, read, draining);
+                            let outcome = handle(&state, &runtime, &port.table, read, draining);
+                            let ack = shm::ShmInsertAck::new(origin, batch_id, outcome);
+                            if let Err(e) = port.acks.send_copy(ack) {
+                                tracing::warn!(error = ?e, "sending a shared-memory acknowledgement");
+                            }
                             true
                         }
                         Ok(None) => false,
@@ -92,15 +110,15 @@ impl ShmIngest {
                 };
                 while !state.shutdown.is_triggered() {
                     let mut busy = false;
-                    for (table, sub, _) in &subscribers {
-                        busy |= receive(table, sub, false);
+                    for port in &subscribers {
+                        busy |= receive(port, false);
                     }
                     if !busy {
                         std::thread::sleep(IDLE);
                     }
                 }
-                for (table, sub, _) in &subscribers {
-                    while receive(table, sub, true) {}
+                for port in &subscribers {
+                    while receive(port, true) {}
                 }
             })
             .map_err(|e| ShmError::iceoryx("starting the ingest thread", e))?;
@@ -134,24 +152,36 @@ impl ShmIngest {
     }
 }
 
-type Sub = iceoryx2::port::subscriber::Subscriber<
-    iceoryx2::service::ipc::Service,
-    [u8],
-    shm::BatchFrameHeader,
->;
+type Ipc = iceoryx2::service::ipc::Service;
+
+/// One table's shared-memory ports.
+struct Port {
+    table: Arc<Table>,
+    subscriber: iceoryx2::port::subscriber::Subscriber<Ipc, [u8], shm::BatchFrameHeader>,
+    acks: iceoryx2::port::publisher::Publisher<Ipc, shm::ShmInsertAck, ()>,
+    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        Ipc,
+        [u8],
+        shm::BatchFrameHeader,
+    >,
+    _ack_service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, shm::ShmInsertAck, ()>,
+}
 
 /// Validates, prepares and inserts one received batch; counts and logs
-/// rejections (a shared-memory publisher has no reply channel).
+/// rejections. Returns what to acknowledge: `(inserted, table size)` or
+/// the rejection's reason.
 fn handle(
     state: &State,
     runtime: &tokio::runtime::Handle,
     table: &Arc<Table>,
     read: Result<(String, u64, crossroads_common::TransitionBatch), BatchError>,
     draining: bool,
-) {
+) -> Result<(u32, u64), RejectReason> {
     let reject = |e: BatchError| {
         state.metrics.reject(e.reason);
         tracing::warn!(table = table.name(), reason = %e.reason, error = %e, "rejected a shared-memory batch");
+        Err(e.reason)
     };
     let (name, batch_id, batch) = match read {
         Ok(ok) => ok,
@@ -191,7 +221,7 @@ fn handle(
                 table
                     .metrics()
                     .inserted(Transport::Shm, u64::from(done.inserted));
-                return;
+                return Ok((done.inserted, done.size));
             }
             // Keep the batch and keep waiting: the full queue pushes back on
             // the publishers meanwhile.
@@ -201,7 +231,7 @@ fn handle(
             Err(TableError::Invalid(e)) => return reject(e),
             Err(e) => {
                 tracing::error!(table = table.name(), batch_id, error = %e, "inserting a shared-memory batch");
-                return;
+                return Err(RejectReason::BadRequest);
             }
         }
     }

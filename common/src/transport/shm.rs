@@ -7,16 +7,23 @@
 //! batch's columns followed by its observation pool, encoded by
 //! [`crate::codec`] exactly as on gRPC ([`write_frame`], [`read_frame`]).
 //! Both sides open the service with [`open_batch_service`], so its settings
-//! are defined once. [`ShmBatchPublisher`] is the actor's side: it validates,
-//! writes into a loaned slot and sends; a send never waits longer than the
-//! configured timeout, and fails when no replay server is listening, so a
-//! writer never hangs on a dead server.
+//! are defined once. The server answers every batch on
+//! `<prefix>/replay/<table>/acks` ([`open_ack_service`]) with a
+//! [`ShmInsertAck`] naming the publisher and batch, once the batch is stored
+//! (or rejected). [`ShmBatchPublisher`] is the actor's side: it validates,
+//! writes into a loaned slot and sends, and collects its acknowledgements; a
+//! send never waits longer than the configured timeout, and fails when no
+//! replay server is listening, so a writer never hangs on a dead server.
+//! Batches still queued when their publisher goes away are dropped by
+//! iceoryx2, so a publisher [`flush`](ShmBatchPublisher::flush)es before it
+//! ends.
 
 use std::fmt;
 use std::time::Duration;
 
 use iceoryx2::port::BackpressureAction;
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
@@ -169,6 +176,69 @@ impl BatchFrameHeader {
     }
 }
 
+/// The server's answer to one batch, on the acks service. Plain data
+/// (`#[repr(C)]`); every publisher's subscriber sees every answer and keeps
+/// its own by `publisher`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("crossroads.v1.ShmInsertAck")]
+#[repr(C)]
+pub struct ShmInsertAck {
+    /// High half of the iceoryx2 id of the publisher that sent the batch.
+    pub publisher_hi: u64,
+    /// Low half of that id.
+    pub publisher_lo: u64,
+    /// The publisher's batch id.
+    pub batch_id: u64,
+    /// Table size after the insert.
+    pub table_size: u64,
+    /// Transitions stored.
+    pub inserted: u32,
+    /// 0 when stored; otherwise 1 + the position of the [`RejectReason`] in
+    /// [`RejectReason::ALL`].
+    pub rejected: u32,
+}
+
+impl ShmInsertAck {
+    /// The answer for a batch from `publisher`.
+    pub fn new(publisher: u128, batch_id: u64, outcome: Result<(u32, u64), RejectReason>) -> Self {
+        let (inserted, table_size, rejected) = match outcome {
+            Ok((inserted, size)) => (inserted, size, 0),
+            Err(reason) => (
+                0,
+                0,
+                RejectReason::ALL
+                    .iter()
+                    .position(|r| *r == reason)
+                    .map_or(u32::MAX, |i| i as u32 + 1),
+            ),
+        };
+        Self {
+            publisher_hi: (publisher >> 64) as u64,
+            publisher_lo: publisher as u64,
+            batch_id,
+            table_size,
+            inserted,
+            rejected,
+        }
+    }
+
+    /// The publisher's id.
+    pub fn publisher(&self) -> u128 {
+        (u128::from(self.publisher_hi) << 64) | u128::from(self.publisher_lo)
+    }
+
+    /// `Ok((inserted, table_size))`, or why the batch was rejected.
+    pub fn outcome(&self) -> Result<(u32, u64), RejectReason> {
+        match self.rejected {
+            0 => Ok((self.inserted, self.table_size)),
+            n => Err(RejectReason::ALL
+                .get(n as usize - 1)
+                .copied()
+                .unwrap_or(RejectReason::BadRequest)),
+        }
+    }
+}
+
 /// Writes `batch`'s columns and pool into `out`, which is exactly
 /// [`BatchFrameHeader::payload_len`] bytes.
 pub fn write_frame(batch: &TransitionBatch, out: &mut [u8]) {
@@ -288,6 +358,16 @@ pub fn service_name(prefix: &str, table: &str) -> String {
     format!("{prefix}/replay/{table}/insert")
 }
 
+/// Name of the acknowledgement service of `table`.
+pub fn ack_service_name(prefix: &str, table: &str) -> String {
+    format!("{prefix}/replay/{table}/acks")
+}
+
+/// Acknowledgements one publisher's subscriber holds before the oldest are
+/// overwritten (a publisher that does not poll loses old answers, never
+/// blocks the server).
+pub const ACK_BUFFER: usize = 1024;
+
 /// Why shared memory could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ShmError {
@@ -307,6 +387,16 @@ pub enum ShmError {
     NoSubscriber {
         /// The service name.
         service: String,
+    },
+    /// Batches sent were not acknowledged within the timeout.
+    #[error("{pending} batches on {service} not acknowledged within {timeout:?}")]
+    Unacknowledged {
+        /// The service name.
+        service: String,
+        /// Batches still waiting for an answer.
+        pending: usize,
+        /// The timeout.
+        timeout: Duration,
     },
     /// The server's queue stayed full for the whole send timeout.
     #[error("the replay server's queue on {service} stayed full for {timeout:?}; batch dropped")]
@@ -329,8 +419,11 @@ impl ShmError {
     }
 }
 
-/// A fresh iceoryx2 node for this process.
+/// A fresh iceoryx2 node for this process. iceoryx2's own console log is
+/// limited to errors unless `IOX2_LOG_LEVEL` says otherwise (it warns about
+/// running on its default config, which is what we want).
 pub fn node() -> Result<Node<ipc::Service>, ShmError> {
+    set_log_level_from_env_or(LogLevel::Error);
     NodeBuilder::new()
         .create::<ipc::Service>()
         .map_err(|e| ShmError::iceoryx("creating node", e))
@@ -362,19 +455,59 @@ pub fn open_batch_service(
         .map_err(|e| ShmError::iceoryx("opening service", e))
 }
 
+/// Opens (or creates) the acknowledgement service of `table`: one server
+/// publishes, every batch publisher subscribes; old answers are overwritten
+/// rather than blocking the server.
+pub fn open_ack_service(
+    node: &Node<ipc::Service>,
+    config: &TransportConfig,
+    table: &str,
+) -> Result<PortFactory<ipc::Service, ShmInsertAck, ()>, ShmError> {
+    let name = ack_service_name(&config.shm_prefix, table);
+    let name: ServiceName = name
+        .as_str()
+        .try_into()
+        .map_err(|e| ShmError::iceoryx("service name", e))?;
+    node.service_builder(&name)
+        .publish_subscribe::<ShmInsertAck>()
+        .enable_safe_overflow(true)
+        .history_size(0)
+        .subscriber_max_buffer_size(ACK_BUFFER)
+        .subscriber_max_borrowed_samples(4)
+        .max_publishers(4)
+        .max_subscribers(config.shm_max_publishers)
+        .open_or_create()
+        .map_err(|e| ShmError::iceoryx("opening ack service", e))
+}
+
+/// What the server did with one batch sent over shared memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShmAck {
+    /// The id given to [`ShmBatchPublisher::send`].
+    pub batch_id: u64,
+    /// `Ok((inserted, table_size))` once stored, or why it was rejected.
+    pub outcome: Result<(u32, u64), RejectReason>,
+}
+
 /// An actor's publisher of batches to the replay server on this host.
 ///
 /// Not `Send`: create and use it on one thread. Each [`send`](Self::send)
 /// validates the batch, writes it into shared memory once and hands it to
 /// the server's queue; it waits at most `shm_send_timeout_ms` when the queue
 /// is full and fails when no server listens, so the caller can buffer and
-/// retry (or fall back to gRPC).
+/// retry (or fall back to gRPC). [`poll_acks`](Self::poll_acks) returns the
+/// server's answers (stored or rejected) for batches sent;
+/// [`flush`](Self::flush) waits for all of them.
 pub struct ShmBatchPublisher {
     service_name: String,
     table: String,
     timeout: Duration,
+    id: u128,
+    in_flight: std::collections::VecDeque<u64>,
     publisher: Publisher<ipc::Service, [u8], BatchFrameHeader>,
-    _service: PortFactory<ipc::Service, [u8], BatchFrameHeader>,
+    acks: Subscriber<ipc::Service, ShmInsertAck, ()>,
+    service: PortFactory<ipc::Service, [u8], BatchFrameHeader>,
+    _ack_service: PortFactory<ipc::Service, ShmInsertAck, ()>,
     _node: Node<ipc::Service>,
 }
 
@@ -383,6 +516,7 @@ impl fmt::Debug for ShmBatchPublisher {
         f.debug_struct("ShmBatchPublisher")
             .field("service", &self.service_name)
             .field("timeout", &self.timeout)
+            .field("in_flight", &self.in_flight.len())
             .finish_non_exhaustive()
     }
 }
@@ -407,12 +541,22 @@ impl ShmBatchPublisher {
             })
             .create()
             .map_err(|e| ShmError::iceoryx("creating publisher", e))?;
+        let ack_service = open_ack_service(&node, config, table)?;
+        let acks = ack_service
+            .subscriber_builder()
+            .buffer_size(ACK_BUFFER)
+            .create()
+            .map_err(|e| ShmError::iceoryx("creating ack subscriber", e))?;
         Ok(Self {
             service_name: service_name(&config.shm_prefix, table),
             table: table.to_owned(),
             timeout,
+            id: publisher.id().value(),
+            in_flight: std::collections::VecDeque::new(),
             publisher,
-            _service: service,
+            acks,
+            service,
+            _ack_service: ack_service,
             _node: node,
         })
     }
@@ -424,12 +568,18 @@ impl ShmBatchPublisher {
 
     /// Number of replay servers listening.
     pub fn subscribers(&self) -> usize {
-        self._service.dynamic_config().number_of_subscribers()
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Batches sent and not yet answered, oldest first.
+    pub fn in_flight(&self) -> impl Iterator<Item = u64> + '_ {
+        self.in_flight.iter().copied()
     }
 
     /// Validates and sends one batch. `Ok` means a replay server's queue
-    /// holds it; the server validates again and stores it.
-    pub fn send(&self, batch_id: u64, batch: &TransitionBatch) -> Result<(), ShmError> {
+    /// holds it; the server validates again, stores it and answers (see
+    /// [`poll_acks`](Self::poll_acks)).
+    pub fn send(&mut self, batch_id: u64, batch: &TransitionBatch) -> Result<(), ShmError> {
         batch.validate()?;
         let (header, len) = BatchFrameHeader::for_batch(&self.table, batch_id, batch)?;
         let mut sample = self
@@ -442,7 +592,10 @@ impl ShmBatchPublisher {
             Ok(0) => Err(ShmError::NoSubscriber {
                 service: self.service_name.clone(),
             }),
-            Ok(_) => Ok(()),
+            Ok(_) => {
+                self.in_flight.push_back(batch_id);
+                Ok(())
+            }
             Err(iceoryx2::port::SendError::UnableToDeliver) => Err(ShmError::Full {
                 service: self.service_name.clone(),
                 timeout: self.timeout,
@@ -450,12 +603,66 @@ impl ShmBatchPublisher {
             Err(e) => Err(ShmError::iceoryx("sending", e)),
         }
     }
+
+    /// The server's answers that arrived for this publisher's batches, in
+    /// the order received; does not wait.
+    pub fn poll_acks(&mut self) -> Result<Vec<ShmAck>, ShmError> {
+        let mut out = Vec::new();
+        while let Some(sample) = self
+            .acks
+            .receive()
+            .map_err(|e| ShmError::iceoryx("receiving acks", e))?
+        {
+            let ack = *sample.payload();
+            if ack.publisher() != self.id {
+                continue;
+            }
+            if let Some(i) = self.in_flight.iter().position(|b| *b == ack.batch_id) {
+                self.in_flight.remove(i);
+            }
+            out.push(ShmAck {
+                batch_id: ack.batch_id,
+                outcome: ack.outcome(),
+            });
+        }
+        Ok(out)
+    }
+
+    /// Waits until every batch sent is answered, at most `timeout`;
+    /// returns the answers. Call before dropping the publisher: iceoryx2
+    /// drops batches still queued from a publisher that is gone.
+    pub fn flush(&mut self, timeout: Duration) -> Result<Vec<ShmAck>, ShmError> {
+        let start = std::time::Instant::now();
+        let mut acks = self.poll_acks()?;
+        while !self.in_flight.is_empty() {
+            if start.elapsed() >= timeout {
+                return Err(ShmError::Unacknowledged {
+                    service: self.service_name.clone(),
+                    pending: self.in_flight.len(),
+                    timeout,
+                });
+            }
+            std::thread::sleep(Duration::from_millis(1));
+            acks.extend(self.poll_acks()?);
+        }
+        Ok(acks)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::batch::Transition;
+
+    #[test]
+    fn ack_round_trip() {
+        let id = (7u128 << 64) | 9;
+        let a = ShmInsertAck::new(id, 3, Ok((10, 99)));
+        assert_eq!((a.publisher(), a.outcome()), (id, Ok((10, 99))));
+        for reason in RejectReason::ALL {
+            assert_eq!(ShmInsertAck::new(id, 3, Err(reason)).outcome(), Err(reason));
+        }
+    }
 
     #[test]
     fn frame_round_trip() {

@@ -27,7 +27,7 @@ fn publisher_child() {
     let Ok(prefix) = std::env::var(CHILD_PREFIX) else {
         return;
     };
-    let publisher = ShmBatchPublisher::new(&transport(&prefix), "t").expect("publisher");
+    let mut publisher = ShmBatchPublisher::new(&transport(&prefix), "t").expect("publisher");
     let start = Instant::now();
     while publisher.subscribers() == 0 {
         assert!(
@@ -41,6 +41,26 @@ fn publisher_child() {
             .send(u64::from(b), &batch(b * 10, 10, None))
             .expect("send");
     }
+    let acks = publisher
+        .flush(Duration::from_secs(20))
+        .expect("every batch answered");
+    assert_eq!(acks.len(), 5);
+    for (i, ack) in acks.iter().enumerate() {
+        assert_eq!(ack.batch_id, i as u64);
+        assert_eq!(
+            ack.outcome,
+            Ok((10, 10 * (i as u64 + 1))),
+            "stored, in order"
+        );
+    }
+    // A batch the table refuses (another observation kind) is answered with
+    // its rejection, not silently dropped.
+    let mut other = batch(50, 10, None);
+    other.spec.kind = "other".to_owned();
+    publisher.send(5, &other).expect("send");
+    let acks = publisher.flush(Duration::from_secs(20)).expect("answered");
+    assert_eq!(acks.len(), 1);
+    assert_eq!(acks[0].outcome, Err(crossroads_common::RejectReason::Spec));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -54,19 +74,25 @@ async fn batches_from_another_process_land_in_the_table() {
         .await
         .expect("start");
 
-    let child = tokio::process::Command::new(std::env::current_exe().expect("test binary"))
-        .args([
-            "shm::publisher_child",
-            "--exact",
-            "--ignored",
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(CHILD_PREFIX, &prefix)
-        .output();
+    let child = {
+        let prefix = prefix.clone();
+        tokio::task::spawn_blocking(move || {
+            std::process::Command::new(std::env::current_exe().expect("test binary"))
+                .args([
+                    "shm::publisher_child",
+                    "--exact",
+                    "--ignored",
+                    "--nocapture",
+                    "--test-threads=1",
+                ])
+                .env(CHILD_PREFIX, &prefix)
+                .output()
+        })
+    };
     let out = tokio::time::timeout(Duration::from_secs(60), child)
         .await
         .expect("child finished")
+        .expect("task")
         .expect("child ran");
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -116,7 +142,7 @@ async fn batches_from_another_process_land_in_the_table() {
 #[test]
 fn a_publisher_without_a_server_fails_fast() {
     let prefix = unique_prefix("no-server");
-    let publisher = ShmBatchPublisher::new(&transport(&prefix), "t").expect("publisher");
+    let mut publisher = ShmBatchPublisher::new(&transport(&prefix), "t").expect("publisher");
     assert_eq!(publisher.subscribers(), 0);
     let start = Instant::now();
     let err = publisher
@@ -128,4 +154,11 @@ fn a_publisher_without_a_server_fails_fast() {
     bad.rewards[1] = f32::NAN;
     let err = publisher.send(1, &bad).expect_err("invalid");
     assert!(err.to_string().contains("rewards[1]"), "{err}");
+    assert_eq!(publisher.in_flight().count(), 0);
+    assert!(
+        publisher
+            .flush(Duration::from_millis(10))
+            .expect("nothing pending")
+            .is_empty()
+    );
 }

@@ -1,7 +1,6 @@
 //! Table semantics: proportional sampling, importance weights, FIFO
 //! eviction, ignored updates, shared observations, concurrency.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
