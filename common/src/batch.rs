@@ -42,7 +42,7 @@ impl ObservationSpec {
 
     /// Number of values of one observation; `None` if the shape is empty or
     /// larger than [`MAX_OBSERVATION_LEN`].
-    pub fn len(&self) -> Option<usize> {
+    pub fn num_values(&self) -> Option<usize> {
         if self.shape.is_empty() {
             return None;
         }
@@ -258,7 +258,7 @@ impl TransitionBatch {
     /// every observation entry valid for the spec's length. The first
     /// problem found is returned, naming its field.
     pub fn validate(&self) -> Result<(), BatchError> {
-        let obs_len = self.spec.len().ok_or_else(|| {
+        let obs_len = self.spec.num_values().ok_or_else(|| {
             BatchError::new(
                 RejectReason::Spec,
                 "spec.shape",
@@ -552,7 +552,8 @@ mod tests {
 
     #[test]
     fn each_problem_names_its_field() {
-        let cases: Vec<(fn(&mut TransitionBatch), RejectReason, &str)> = vec![
+        type Mutation = fn(&mut TransitionBatch);
+        let cases: Vec<(Mutation, RejectReason, &str)> = vec![
             (
                 |b| b.actions[0] = 4,
                 RejectReason::ActionRange,
@@ -616,8 +617,11 @@ mod tests {
 
     #[test]
     fn spec_len_guards_overflow() {
-        assert_eq!(ObservationSpec::ttg().len(), Some(1404));
-        assert_eq!(ObservationSpec::new("x", [u32::MAX, u32::MAX]).len(), None);
-        assert_eq!(ObservationSpec::new("x", [0]).len(), None);
+        assert_eq!(ObservationSpec::ttg().num_values(), Some(1404));
+        assert_eq!(
+            ObservationSpec::new("x", [u32::MAX, u32::MAX]).num_values(),
+            None
+        );
+        assert_eq!(ObservationSpec::new("x", [0]).num_values(), None);
     }
 }

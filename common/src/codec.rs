@@ -143,7 +143,7 @@ pub fn check(encoding: ObservationEncoding, bytes: &[u8], len: usize) -> Result<
             Ok(non_zero)
         }
         ObservationEncoding::SparseF32 => {
-            if bytes.len() % PAIR != 0 || bytes.len() / PAIR > len {
+            if !bytes.len().is_multiple_of(PAIR) || bytes.len() / PAIR > len {
                 return Err(CodecError::Length {
                     expected: format!("a multiple of {PAIR}, at most {}", len * PAIR),
                     got: bytes.len(),

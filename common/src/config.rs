@@ -554,7 +554,7 @@ impl ConfigLoader {
         }
 
         let config: Config = figment.extract().map_err(|e| {
-            ConfigError::Invalid(e.into_iter().map(|e| problem_of(&figment, e)).collect())
+            ConfigError::Invalid(e.into_iter().map(|e| problem_of(&figment, &e)).collect())
         })?;
         let problems: Vec<_> = config
             .validate()
@@ -590,7 +590,7 @@ impl<P: Provider> Provider for Named<P> {
     }
 }
 
-fn problem_of(figment: &Figment, e: figment::Error) -> ConfigProblem {
+fn problem_of(figment: &Figment, e: &figment::Error) -> ConfigProblem {
     use figment::error::Kind;
     // For an unknown field the path already ends with the field's name.
     let key = e.path.join(".");

@@ -67,7 +67,7 @@ pub fn batch_to_wire(batch: TransitionBatch) -> pb::TransitionBatch {
         observations: Some(pb::ObservationPool {
             encoding: encoding.to_wire() as i32,
             offsets,
-            data: data.into(),
+            data,
         }),
         observation_index: batch.observation_index,
         next_observation_index: batch.next_observation_index,

@@ -76,7 +76,7 @@ impl State {
     }
 
     /// Counts a rejection and turns it into a status.
-    pub fn reject(&self, e: BatchError) -> Status {
+    pub fn reject(&self, e: &BatchError) -> Status {
         self.metrics.reject(e.reason);
         tracing::debug!(reason = %e.reason, error = %e, "rejected input");
         match e.reason {
@@ -87,7 +87,7 @@ impl State {
 
     fn status(&self, e: TableError) -> Status {
         match e {
-            TableError::Invalid(e) => self.reject(e),
+            TableError::Invalid(e) => self.reject(&e),
             TableError::Timeout { .. } => Status::deadline_exceeded(e.to_string()),
             TableError::ShuttingDown => Status::unavailable(e.to_string()),
             TableError::Corrupt(_) => Status::data_loss(e.to_string()),
@@ -95,16 +95,16 @@ impl State {
     }
 
     async fn insert(&self, request: pb::InsertRequest) -> Result<pb::InsertAck, Status> {
-        let table = self.table(&request.table).map_err(|e| self.reject(e))?;
+        let table = self.table(&request.table).map_err(|e| self.reject(&e))?;
         let batch = request.batch.ok_or_else(|| {
-            self.reject(BatchError::new(
+            self.reject(&BatchError::new(
                 RejectReason::BadRequest,
                 "batch",
                 "missing",
             ))
         })?;
         if batch.actions.len() > self.limits.max_batch_transitions {
-            return Err(self.reject(BatchError::new(
+            return Err(self.reject(&BatchError::new(
                 RejectReason::Oversized,
                 "batch.actions",
                 format!(
@@ -114,8 +114,8 @@ impl State {
                 ),
             )));
         }
-        let batch = wire::batch_from_wire(batch).map_err(|e| self.reject(e.within("batch")))?;
-        let prepared = PreparedBatch::new(batch).map_err(|e| self.reject(e.within("batch")))?;
+        let batch = wire::batch_from_wire(batch).map_err(|e| self.reject(&e.within("batch")))?;
+        let prepared = PreparedBatch::new(batch).map_err(|e| self.reject(&e.within("batch")))?;
         let done = table
             .insert(&prepared, self.limits.insert_timeout, &self.shutdown)
             .await
@@ -198,9 +198,9 @@ impl pb::replay_server::Replay for ReplayService {
     ) -> Result<Response<pb::SampleResponse>, Status> {
         let state = &self.state;
         let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(e))?;
+        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
         if r.batch_size as usize > state.limits.max_sample_batch {
-            return Err(state.reject(BatchError::new(
+            return Err(state.reject(&BatchError::new(
                 RejectReason::Oversized,
                 "batch_size",
                 format!(
@@ -210,7 +210,7 @@ impl pb::replay_server::Replay for ReplayService {
             )));
         }
         if !r.beta.is_finite() {
-            return Err(state.reject(BatchError::new(
+            return Err(state.reject(&BatchError::new(
                 RejectReason::BadRequest,
                 "beta",
                 format!("{} is not in [0, 1]", r.beta),
@@ -243,9 +243,9 @@ impl pb::replay_server::Replay for ReplayService {
     ) -> Result<Response<pb::UpdatePrioritiesResponse>, Status> {
         let state = &self.state;
         let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(e))?;
+        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
         if r.keys.len() > state.limits.max_sample_batch {
-            return Err(state.reject(BatchError::new(
+            return Err(state.reject(&BatchError::new(
                 RejectReason::Oversized,
                 "keys",
                 format!(
@@ -270,7 +270,7 @@ impl pb::replay_server::Replay for ReplayService {
     ) -> Result<Response<pb::TableInfo>, Status> {
         let state = &self.state;
         let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(e))?;
+        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
         let s = table.stats();
         Ok(Response::new(pb::TableInfo {
             name: s.name,

@@ -244,6 +244,9 @@ pub fn read(path: &Path) -> Result<Vec<(String, TableImage)>, SnapshotError> {
     })
 }
 
+/// A restored snapshot: its path and its tables by name.
+pub type Restored = (PathBuf, Vec<(String, TableImage)>);
+
 /// Writes and restores the server's snapshots in one directory.
 #[derive(Debug)]
 pub struct Snapshots {
@@ -286,7 +289,7 @@ impl Snapshots {
                 found.push((seq, entry.path()));
             }
         }
-        found.sort_by(|a, b| b.0.cmp(&a.0));
+        found.sort_by_key(|(seq, _)| std::cmp::Reverse(*seq));
         Ok(found)
     }
 
@@ -378,9 +381,7 @@ impl Snapshots {
     /// reported, renamed `*.corrupt` (kept for inspection) and skipped for
     /// an older valid one; if snapshots exist and none is valid, that is an
     /// error rather than a silent empty start.
-    pub fn restore_latest(
-        &self,
-    ) -> Result<Option<(PathBuf, Vec<(String, TableImage)>)>, SnapshotError> {
+    pub fn restore_latest(&self) -> Result<Option<Restored>, SnapshotError> {
         let mut problems = Vec::new();
         for (_, path) in self.list()? {
             match read(&path) {

@@ -120,7 +120,7 @@ impl PreparedBatch {
     /// did, which makes this a cheap second pass).
     pub fn new(batch: TransitionBatch) -> Result<Self, BatchError> {
         batch.validate()?;
-        let len = batch.spec.len().unwrap_or(0);
+        let len = batch.spec.num_values().unwrap_or(0);
         let channels = compact::channels_of(&batch.spec.shape);
         let pool = &batch.observations;
         let mut bytes = Vec::new();
@@ -661,7 +661,7 @@ struct RawSample {
 
 impl RawSample {
     fn finish(self) -> Result<Sample, TableError> {
-        let len = self.spec.len().unwrap_or(MAX_OBSERVATION_LEN);
+        let len = self.spec.num_values().unwrap_or(MAX_OBSERVATION_LEN);
         let mut pool = ObservationPool::new(ObservationEncoding::SparseF32);
         let mut wire = Vec::new();
         for (id, bytes) in &self.observations {

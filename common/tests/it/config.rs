@@ -13,7 +13,7 @@ fn toml_file(content: &str) -> tempfile::NamedTempFile {
     f
 }
 
-fn problems(err: ConfigError) -> Vec<(String, String, String)> {
+fn problems(err: &ConfigError) -> Vec<(String, String, String)> {
     err.problems()
         .iter()
         .map(|p| (p.origin.clone(), p.key.clone(), p.problem.clone()))
@@ -49,7 +49,7 @@ fn unknown_key_names_file_and_key() {
         .file(Some(f.path()))
         .load()
         .expect_err("unknown key");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p.len(), 1, "{p:?}");
     let (origin, key, problem) = &p[0];
     assert_eq!(key, "runtime.worker_thread");
@@ -69,7 +69,7 @@ fn unknown_section_names_the_section() {
         .file(Some(f.path()))
         .load()
         .expect_err("unknown section");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].1, "learnr", "{p:?}");
 }
 
@@ -82,7 +82,7 @@ fn wrong_type_names_file_and_key() {
         .load()
         .expect_err("wrong type");
     let message = err.to_string();
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].1, "runtime.worker_threads", "{p:?}");
     assert!(p[0].0.contains("config file"), "{p:?}");
     assert!(p[0].2.contains("invalid type"), "{p:?}");
@@ -97,7 +97,7 @@ fn out_of_range_value_names_file_key_and_range() {
         .file(Some(f.path()))
         .load()
         .expect_err("out of range");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p.len(), 1, "{p:?}");
     assert_eq!(p[0].1, "runtime.worker_threads");
     assert!(p[0].0.contains(&f.path().display().to_string()), "{p:?}");
@@ -112,7 +112,7 @@ fn enum_value_outside_the_choices_is_named() {
         .file(Some(f.path()))
         .load()
         .expect_err("bad enum");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].1, "telemetry.log_format", "{p:?}");
     assert!(p[0].2.contains("xml"), "{p:?}");
 }
@@ -134,7 +134,7 @@ fn set_overrides_file_and_errors_name_the_command_line() {
         .sets(["runtime.worker_threads=999"])
         .load()
         .expect_err("out of range from --set");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].0, "command line", "{p:?}");
     assert_eq!(p[0].1, "runtime.worker_threads");
 

@@ -42,7 +42,7 @@ async fn round_trip_restores_items_keys_priorities_and_counters() {
     let dir = tempfile::tempdir().expect("temp dir");
     let t = filled().await;
     let s = snapshots(dir.path(), 2);
-    let written = s.write(&[t.clone()]).expect("write");
+    let written = s.write(std::slice::from_ref(&t)).expect("write");
     assert_eq!(written.items, 50);
     assert!(written.path.starts_with(dir.path()));
 
@@ -122,10 +122,10 @@ async fn a_corrupt_newest_snapshot_falls_back_to_the_last_good_one() {
     let dir = tempfile::tempdir().expect("temp dir");
     let t = filled().await;
     let s = snapshots(dir.path(), 2);
-    let good = s.write(&[t.clone()]).expect("first");
+    let good = s.write(std::slice::from_ref(&t)).expect("first");
     let good_image = t.image();
     insert(&t, 900, 5, None).await;
-    let newest = s.write(&[t.clone()]).expect("second");
+    let newest = s.write(std::slice::from_ref(&t)).expect("second");
     assert_eq!(files(dir.path()).len(), 2);
 
     // Flip one bit in the middle of the newest.
@@ -152,7 +152,7 @@ async fn a_corrupt_newest_snapshot_falls_back_to_the_last_good_one() {
 
     // The next snapshot takes a new number; the corrupt file is not reused
     // or overwritten.
-    let third = s.write(&[t.clone()]).expect("third");
+    let third = s.write(std::slice::from_ref(&t)).expect("third");
     assert_ne!(third.path, newest.path);
     assert!(
         files(dir.path())
@@ -197,7 +197,7 @@ async fn keeps_only_the_newest_snapshots() {
     let t = filled().await;
     let s = snapshots(dir.path(), 2);
     let paths: Vec<_> = (0..4)
-        .map(|_| s.write(&[t.clone()]).expect("write").path)
+        .map(|_| s.write(std::slice::from_ref(&t)).expect("write").path)
         .collect();
     let names = files(dir.path());
     assert_eq!(names.len(), 2, "{names:?}");

@@ -72,7 +72,12 @@ async fn importance_weights_match_hand_computed_values() {
     //   w_i = (N P_i)^-0.5 = (4 leaf_i / 7.2426)^-0.5
     //       = 1.3456, 1.1315, 0.9515, 0.8001
     // normalized by the table's largest (item 0): 1, 0.8409, 0.7071, 0.5946.
-    let expected = [1.0f32, 0.840_896_4, 0.707_106_8, 0.594_603_6];
+    let expected = [
+        1.0f32,
+        0.840_896_4,
+        std::f32::consts::FRAC_1_SQRT_2,
+        0.594_603_6,
+    ];
     let t = table(4, 0.5);
     insert(&t, 0, 4, Some(&[1.0, 2.0, 4.0, 8.0])).await;
     let s = sample(&t, 400, 0.5).await;
