@@ -261,6 +261,14 @@ impl Snapshots {
     /// Snapshots in `dir` (created if missing), keeping the newest `keep`.
     pub fn new(dir: PathBuf, keep: usize, metrics: ReplayMetrics) -> Result<Self, SnapshotError> {
         fs::create_dir_all(&dir).map_err(io(&dir, "creating the directory"))?;
+        // Temporary files of a write that crashed are never valid snapshots.
+        for entry in fs::read_dir(&dir).map_err(io(&dir, "listing"))?.flatten() {
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            if name.starts_with(&format!(".{PREFIX}")) && name.ends_with(".tmp") {
+                let _ = fs::remove_file(entry.path());
+            }
+        }
         Ok(Self {
             dir,
             keep: keep.max(1),

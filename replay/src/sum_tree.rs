@@ -6,8 +6,9 @@
 /// whose inner nodes hold their children's sums and minimums.
 ///
 /// Cost: [`set`](Self::set) and [`find`](Self::find) are O(log n);
-/// [`total`](Self::total) and [`min`](Self::min) are O(1). Memory: 12 bytes
-/// per slot rounded up to a power of two (f64 sums, f32 minimums). Inner
+/// [`total`](Self::total) and [`min`](Self::min) are O(1). Memory: 24 bytes
+/// per slot, slots rounded up to a power of two (f64 sums and f32 minimums
+/// for leaves and inner nodes). Inner
 /// sums are recomputed from the children on every update, never adjusted
 /// by differences, so rounding errors do not accumulate. Not thread-safe;
 /// the table holds it behind its lock.

@@ -2,4 +2,5 @@
 //! one test binary.
 
 mod cli;
+mod replay;
 mod setup_libtorch;

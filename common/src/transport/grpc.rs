@@ -137,7 +137,7 @@ pub struct ReplayClient {
 impl ReplayClient {
     /// A client of `config.replay_endpoint`. It connects lazily: a server
     /// that is not up yet makes calls fail with a retryable error, not this
-    /// constructor.
+    /// constructor. Must be called inside a tokio runtime.
     pub fn new(config: &TransportConfig, table: &str) -> Result<Self, ClientError> {
         let endpoint = Endpoint::from_shared(config.replay_endpoint.clone())
             .map_err(|e| ClientError::Endpoint {

@@ -188,3 +188,62 @@ fn rendered_config_loads_back_identically() {
         .expect("round trip");
     assert_eq!(config, back);
 }
+
+#[test]
+fn replay_and_transport_sections_have_valid_defaults_and_checked_ranges() {
+    let config = ConfigLoader::new().without_env().load().expect("defaults");
+    assert_eq!(config.replay.capacity, 1_000_000);
+    assert_eq!(config.transport.replay_endpoint, "http://127.0.0.1:50051");
+
+    let err = ConfigLoader::new()
+        .without_env()
+        .sets([
+            "replay.capacity=0",
+            "replay.alpha=1.5",
+            "replay.samples_per_insert=8.0",
+            "replay.rate_tolerance=2.0",
+            "transport.replay_endpoint=replay:50051",
+        ])
+        .load()
+        .expect_err("out of range");
+    let keys: Vec<String> = problems(&err).into_iter().map(|p| p.1).collect();
+    for key in [
+        "replay.capacity",
+        "replay.alpha",
+        "replay.rate_tolerance",
+        "replay.min_size_to_sample",
+        "transport.replay_endpoint",
+    ] {
+        assert!(keys.iter().any(|k| k == key), "{key} missing from {keys:?}");
+    }
+
+    let f = toml_file(
+        "[replay]\ncapacity = 5\nsnapshot_dir = \"/tmp/x\"\n[transport]\nshm_prefix = \"bad prefix\"\n",
+    );
+    let err = ConfigLoader::new()
+        .without_env()
+        .file(Some(f.path()))
+        .load()
+        .expect_err("min size above capacity, bad prefix");
+    let p = problems(&err);
+    assert!(
+        p.iter()
+            .any(|p| p.1 == "replay.min_size_to_sample" && p.0.contains("config file")),
+        "{p:?}"
+    );
+    assert!(p.iter().any(|p| p.1 == "transport.shm_prefix"), "{p:?}");
+
+    let config = ConfigLoader::new()
+        .without_env()
+        .flag("replay.capacity", 5000u64)
+        .flag("replay.snapshot_dir", "/var/lib/replay")
+        .flag("replay.listen", "0.0.0.0:0")
+        .load()
+        .expect("flags");
+    assert_eq!(config.replay.capacity, 5000);
+    assert_eq!(
+        config.replay.snapshot_dir.as_deref(),
+        Some(std::path::Path::new("/var/lib/replay"))
+    );
+    assert_eq!(config.replay.listen.port(), 0);
+}

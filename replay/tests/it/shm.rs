@@ -162,3 +162,40 @@ fn a_publisher_without_a_server_fails_fast() {
             .is_empty()
     );
 }
+
+#[test]
+fn a_full_queue_fails_the_send_after_its_timeout_instead_of_hanging() {
+    let prefix = unique_prefix("full");
+    let mut config = transport(&prefix);
+    config.shm_buffer = 2;
+    config.shm_send_timeout_ms = 300;
+    // A "server" that subscribes and never reads.
+    let node = crossroads_common::transport::shm::node().expect("node");
+    let service = crossroads_common::transport::shm::open_batch_service(&node, &config, "t")
+        .expect("service");
+    let _stuck = service
+        .subscriber_builder()
+        .buffer_size(2)
+        .create()
+        .expect("subscriber");
+    let mut publisher = ShmBatchPublisher::new(&config, "t").expect("publisher");
+    publisher.send(0, &batch(0, 2, None)).expect("queued");
+    publisher.send(1, &batch(2, 2, None)).expect("queued");
+    let start = Instant::now();
+    let err = publisher
+        .send(2, &batch(4, 2, None))
+        .expect_err("queue full");
+    let waited = start.elapsed();
+    assert!(matches!(err, ShmError::Full { .. }), "{err:?}");
+    assert!(
+        waited >= Duration::from_millis(300) && waited < Duration::from_secs(5),
+        "{waited:?}"
+    );
+    let err = publisher
+        .flush(Duration::from_millis(100))
+        .expect_err("nobody answers");
+    assert!(
+        matches!(err, ShmError::Unacknowledged { pending: 2, .. }),
+        "{err:?}"
+    );
+}
