@@ -53,8 +53,12 @@ pub enum Command {
     Config(ConfigArgs),
     /// Check this machine: libtorch, threads, and a timed forward pass.
     Doctor(DoctorArgs),
-    /// Run the prioritized replay server: actors insert over gRPC or shared
-    /// memory, the learner samples and updates priorities over gRPC.
+    /// Run the prioritized replay server.
+    ///
+    /// Actors insert batches over gRPC (any host) or iceoryx2 shared memory
+    /// (this host); the learner samples and updates priorities over gRPC.
+    /// Configured by the [replay] and [transport] sections, the environment
+    /// and the flags below; stops on SIGINT/SIGTERM after a last snapshot.
     Replay(ReplayArgs),
     /// Measure throughput and memory of a component.
     Bench(BenchArgs),
@@ -143,8 +147,11 @@ pub struct BenchArgs {
 
 #[derive(Debug, Subcommand)]
 pub enum BenchTarget {
-    /// Replay table: bytes per stored transition, inserts/s and samples/s
-    /// on synthetic TTG episodes (medians over rounds).
+    /// Replay table: bytes per transition, inserts/s, samples/s.
+    ///
+    /// Fills a table with synthetic TTG episodes (3-8 cars per grid), then
+    /// times rounds of inserts (batches of 64) and samples (batches of 256)
+    /// and prints the medians.
     Replay {
         /// Table capacity, filled before timing.
         #[arg(long, default_value_t = 262_144)]

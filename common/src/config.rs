@@ -125,8 +125,8 @@ pub struct ReplayConfig {
     pub min_priority: f64,
     /// Importance weights divided by the table's or the batch's largest.
     pub weight_normalization: WeightNormalization,
-    /// Items inserted before the first sample is allowed; at most
-    /// `capacity`.
+    /// Items inserted before the first sample is allowed (counted over the
+    /// table's life, so a value above `capacity` only delays sampling).
     pub min_size_to_sample: u64,
     /// Target samples per inserted item (the learner neither overfits a
     /// small buffer nor falls behind); 0 turns the ratio off.
@@ -283,14 +283,6 @@ impl Config {
             r.min_priority > 0.0 && r.min_priority.is_finite(),
             "replay.min_priority",
             format!("must be finite and above 0, got {}", r.min_priority),
-        );
-        check(
-            r.min_size_to_sample <= r.capacity,
-            "replay.min_size_to_sample",
-            format!(
-                "must be at most replay.capacity ({}), got {}",
-                r.capacity, r.min_size_to_sample
-            ),
         );
         check(
             r.samples_per_insert >= 0.0 && r.samples_per_insert.is_finite(),

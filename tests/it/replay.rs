@@ -93,16 +93,20 @@ fn batch() -> TransitionBatch {
 #[test]
 fn replay_serves_until_sigterm_and_restores_its_snapshot() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
+    // A runtime per phase: dropping it closes the client's connection, as a
+    // client process that ends would.
+    let runtime = || {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime")
+    };
     let (child, addr) = start(dir.path());
     let transport = TransportConfig {
         replay_endpoint: format!("http://{addr}"),
         ..TransportConfig::default()
     };
-    let ack = runtime
+    let ack = runtime()
         .block_on(async { ReplayClient::new(&transport, "cli")?.insert(batch()).await })
         .expect("insert");
     assert_eq!((ack.inserted, ack.table_size), (10, 10));
@@ -119,7 +123,7 @@ fn replay_serves_until_sigterm_and_restores_its_snapshot() {
         replay_endpoint: format!("http://{addr}"),
         ..TransportConfig::default()
     };
-    let info = runtime
+    let info = runtime()
         .block_on(async { ReplayClient::new(&transport, "cli")?.info().await })
         .expect("info");
     assert_eq!(
