@@ -589,6 +589,13 @@ impl ShmBatchPublisher {
         *sample.user_header_mut() = header;
         write_frame(batch, sample.payload_mut());
         match sample.send() {
+            // Nobody got it: either nobody listens, or the only queue stayed
+            // full for the whole timeout (iceoryx2 reports both as zero
+            // deliveries).
+            Ok(0) if self.subscribers() > 0 => Err(ShmError::Full {
+                service: self.service_name.clone(),
+                timeout: self.timeout,
+            }),
             Ok(0) => Err(ShmError::NoSubscriber {
                 service: self.service_name.clone(),
             }),

@@ -173,12 +173,14 @@ fn a_full_queue_fails_the_send_after_its_timeout_instead_of_hanging() {
     let node = crossroads_common::transport::shm::node().expect("node");
     let service = crossroads_common::transport::shm::open_batch_service(&node, &config, "t")
         .expect("service");
-    let _stuck = service
+    let stuck = service
         .subscriber_builder()
         .buffer_size(2)
         .create()
         .expect("subscriber");
     let mut publisher = ShmBatchPublisher::new(&config, "t").expect("publisher");
+    // It connects (as a polling server does), then reads nothing.
+    assert!(!stuck.has_samples().expect("connected"));
     publisher.send(0, &batch(0, 2, None)).expect("queued");
     publisher.send(1, &batch(2, 2, None)).expect("queued");
     let start = Instant::now();
@@ -186,7 +188,10 @@ fn a_full_queue_fails_the_send_after_its_timeout_instead_of_hanging() {
         .send(2, &batch(4, 2, None))
         .expect_err("queue full");
     let waited = start.elapsed();
-    assert!(matches!(err, ShmError::Full { .. }), "{err:?}");
+    assert!(
+        matches!(err, ShmError::Full { .. }),
+        "{err:?} after {waited:?}"
+    );
     assert!(
         waited >= Duration::from_millis(300) && waited < Duration::from_secs(5),
         "{waited:?}"
