@@ -434,3 +434,65 @@ async fn shutdown_ends_open_streams_and_waiting_samples() {
     let err = waiting.await.expect("task").expect_err("server gone");
     assert!(err.is_retryable(), "{err:?}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn many_actors_stream_while_the_learner_samples_and_updates() {
+    let mut config = server_config(None);
+    config.replay.capacity = 300;
+    config.replay.min_size_to_sample = 64;
+    let (server, shutdown, _r) = serve(&config).await;
+    let mut actors = Vec::new();
+    for a in 0..4u32 {
+        let c = client(&server, "t");
+        actors.push(tokio::spawn(async move {
+            let mut stream = c.insert_stream(4).await.expect("stream");
+            let mut acked = 0;
+            for b in 0..40u32 {
+                if stream.is_full() {
+                    acked += stream.next_ack().await.expect("ack").inserted;
+                }
+                stream
+                    .send(batch(a * 100_000 + b * 8, 8, None))
+                    .await
+                    .expect("send");
+            }
+            for ack in stream.finish().await.expect("acks") {
+                acked += ack.inserted;
+            }
+            acked
+        }));
+    }
+    let learner = {
+        let c = client(&server, "t");
+        tokio::spawn(async move {
+            let mut ignored = 0;
+            for _ in 0..50 {
+                let s = c
+                    .sample(32, 0.4, Duration::from_secs(10))
+                    .await
+                    .expect("sample");
+                let u = c
+                    .update_priorities(s.keys, vec![0.7; 32])
+                    .await
+                    .expect("update");
+                ignored += u.ignored;
+            }
+            ignored
+        })
+    };
+    let mut acked = 0;
+    for a in actors {
+        acked += a.await.expect("actor");
+    }
+    learner.await.expect("learner");
+    assert_eq!(acked, 4 * 40 * 8, "every batch acknowledged");
+    let info = client(&server, "t").info().await.expect("info");
+    assert_eq!(info.inserts_total, u64::from(acked));
+    assert_eq!(info.size, 300);
+    assert_eq!(info.samples_total, 50 * 32);
+    assert_eq!(
+        info.priority_updates_total + info.ignored_updates_total,
+        50 * 32
+    );
+    stop(server, shutdown).await;
+}
