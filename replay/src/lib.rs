@@ -9,7 +9,7 @@
 //! with a checksum. The server ([`server::start`], [`server::run`]) serves
 //! the tables over gRPC ([`service::ReplayService`]) and takes batches from
 //! actors on the same host over iceoryx2 ([`ingest::ShmIngest`]), with the
-//! `crossroads_replay_*` metrics of [`metrics`]. [`bench`] measures inserts,
+//! `crossroads_replay_*` metrics of [`metrics`]. [`bench`](mod@bench) measures inserts,
 //! samples and bytes per stored transition.
 
 pub mod bench;
