@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, Parser, Subcommand};
 use crossroads_common::ConfigLoader;
 use crossroads_sim::ActionSet;
 
@@ -61,7 +61,14 @@ pub enum Command {
     /// Sweep TTC thresholds on a scenario and find the lowest one with zero
     /// collisions (the paper's tuning rule); CSV and PNG with --out.
     TuneTtc(TuneTtcArgs),
-    /// Measure throughput on this machine and print the figures.
+    /// Run the prioritized replay server.
+    ///
+    /// Actors insert batches over gRPC (any host) or iceoryx2 shared memory
+    /// (this host); the learner samples and updates priorities over gRPC.
+    /// Configured by the [replay] and [transport] sections, the environment
+    /// and the flags below; stops on SIGINT/SIGTERM after a last snapshot.
+    Replay(ReplayArgs),
+    /// Measure throughput and memory on this machine and print the figures.
     Bench(BenchArgs),
 }
 
@@ -118,28 +125,6 @@ pub struct TuneTtcArgs {
     pub out: Option<PathBuf>,
 }
 
-/// `crossroads bench`.
-#[derive(Debug, Args)]
-pub struct BenchArgs {
-    /// What to measure.
-    #[arg(value_enum)]
-    pub target: BenchTarget,
-    /// Least time per measurement, in seconds.
-    #[arg(long, default_value_t = 1.0)]
-    pub seconds: f64,
-    /// Print JSON instead of a table.
-    #[arg(long)]
-    pub json: bool,
-}
-
-/// Benchmarks `crossroads bench` runs.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-pub enum BenchTarget {
-    /// Simulator: TTG decisions/s with observations and traffic steps/s per
-    /// core, for each built-in scenario.
-    Sim,
-}
-
 fn parse_action_set(s: &str) -> Result<ActionSet, String> {
     s.parse::<ActionSet>().map_err(|e| e.to_string())
 }
@@ -167,4 +152,90 @@ pub struct DoctorArgs {
     /// Print the report as one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `crossroads replay`. Each flag overrides the `[replay]` key of the same
+/// name from the file, the environment and --set.
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// gRPC address to serve on (replay.listen); port 0 picks a free port.
+    #[arg(long, value_name = "ADDR")]
+    pub listen: Option<std::net::SocketAddr>,
+    /// Directory for snapshots, restored at start (replay.snapshot_dir).
+    #[arg(long, value_name = "DIR")]
+    pub snapshot_dir: Option<PathBuf>,
+    /// Items the table holds before evicting the oldest (replay.capacity).
+    #[arg(long, value_name = "N")]
+    pub capacity: Option<u64>,
+    /// Name of the table (replay.table).
+    #[arg(long, value_name = "NAME")]
+    pub table: Option<String>,
+    /// Do not take batches over iceoryx2 shared memory (replay.shm_ingest).
+    #[arg(long)]
+    pub no_shm: bool,
+    /// Start empty even if snapshots exist (replay.restore = false).
+    #[arg(long)]
+    pub no_restore: bool,
+}
+
+impl ReplayArgs {
+    /// Layers these flags over `loader`.
+    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
+        if let Some(v) = self.listen {
+            loader = loader.flag("replay.listen", v.to_string());
+        }
+        if let Some(v) = &self.snapshot_dir {
+            loader = loader.flag("replay.snapshot_dir", v);
+        }
+        if let Some(v) = self.capacity {
+            loader = loader.flag("replay.capacity", v);
+        }
+        if let Some(v) = &self.table {
+            loader = loader.flag("replay.table", v);
+        }
+        if self.no_shm {
+            loader = loader.flag("replay.shm_ingest", false);
+        }
+        if self.no_restore {
+            loader = loader.flag("replay.restore", false);
+        }
+        loader
+    }
+}
+
+/// `crossroads bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub target: BenchTarget,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum BenchTarget {
+    /// Simulator: TTG decisions/s with observations and traffic steps/s per
+    /// core, for each built-in scenario.
+    Sim {
+        /// Least time per measurement, in seconds.
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Replay table: bytes per transition, inserts/s, samples/s.
+    ///
+    /// Fills a table with synthetic TTG episodes (3-8 cars per grid), then
+    /// times rounds of inserts (batches of 64) and samples (batches of 256)
+    /// and prints the medians.
+    Replay {
+        /// Table capacity, filled before timing.
+        #[arg(long, default_value_t = 262_144)]
+        capacity: usize,
+        /// Timed rounds; the median is reported.
+        #[arg(long, default_value_t = 11)]
+        rounds: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
 }

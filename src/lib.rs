@@ -17,11 +17,11 @@ use cli::{Cli, Command};
 
 /// Runs one parsed command line to completion.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    let config = cli
-        .global
-        .loader()
-        .load()
-        .context("loading configuration")?;
+    let loader = match &cli.command {
+        Command::Replay(args) => args.apply(cli.global.loader()),
+        _ => cli.global.loader(),
+    };
+    let config = loader.load().context("loading configuration")?;
     crossroads_common::telemetry::init_tracing(config.telemetry.log_format)?;
     if config.runtime.compute_threads > 0 {
         rayon::ThreadPoolBuilder::new()
@@ -34,6 +34,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Doctor(args) => commands::doctor::run(&config, &args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::TuneTtc(args) => commands::tune_ttc::run(&args),
+        Command::Replay(_) => commands::replay::run(&config),
         Command::Bench(args) => commands::bench::run(&args),
     }
 }

@@ -32,6 +32,11 @@ pub struct Config {
     pub runtime: RuntimeConfig,
     /// Logs and metrics.
     pub telemetry: TelemetryConfig,
+    /// The replay server: its table, rate limiter, limits and snapshots.
+    pub replay: ReplayConfig,
+    /// How roles reach each other: the replay server's address, shared
+    /// memory services, timeouts and retries.
+    pub transport: TransportConfig,
 }
 
 /// Threads of the process.
@@ -88,6 +93,151 @@ impl Default for TelemetryConfig {
     }
 }
 
+/// How importance weights are normalized.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WeightNormalization {
+    /// Divide by the largest weight any item of the table could get (that
+    /// of the lowest priority), so weights are comparable across batches.
+    #[default]
+    Table,
+    /// Divide by the largest weight in the sampled batch (the PER paper's
+    /// practice).
+    Batch,
+}
+
+/// The replay server (`crossroads replay`): one prioritized table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReplayConfig {
+    /// gRPC address to serve on; port 0 picks a free port.
+    pub listen: SocketAddr,
+    /// Name of the table; requests naming another table are rejected.
+    pub table: String,
+    /// Items kept; the oldest is evicted first (FIFO) when full.
+    /// 1 to 100,000,000.
+    pub capacity: u64,
+    /// Priority exponent: items are sampled with probability p^alpha / sum;
+    /// 0 samples uniformly. 0 to 1.
+    pub alpha: f64,
+    /// Priorities below this are raised to it before the exponent, so no
+    /// item becomes unsampleable and weights stay finite. Above 0.
+    pub min_priority: f64,
+    /// Importance weights divided by the table's or the batch's largest.
+    pub weight_normalization: WeightNormalization,
+    /// Items inserted before the first sample is allowed (counted over the
+    /// table's life, so a value above `capacity` only delays sampling).
+    pub min_size_to_sample: u64,
+    /// Target samples per inserted item (the learner neither overfits a
+    /// small buffer nor falls behind); 0 turns the ratio off.
+    pub samples_per_insert: f64,
+    /// How far, in samples, the ratio may drift either way before inserts
+    /// or samples wait. At least max(1, samples_per_insert) when the ratio
+    /// is on.
+    pub rate_tolerance: f64,
+    /// Longest an insert waits for the rate limiter, milliseconds.
+    pub insert_timeout_ms: u64,
+    /// Longest a sample waits for the rate limiter when the request does
+    /// not say, milliseconds.
+    pub sample_timeout_ms: u64,
+    /// Largest gRPC message accepted, bytes (64 KiB to 1 GiB).
+    pub max_message_bytes: usize,
+    /// Largest batch accepted, transitions.
+    pub max_batch_transitions: u32,
+    /// Largest sample or priority update, items.
+    pub max_sample_batch: u32,
+    /// Seed of the sampler's random numbers.
+    pub seed: u64,
+    /// Where snapshots are written and restored from; none disables them.
+    pub snapshot_dir: Option<PathBuf>,
+    /// Seconds between periodic snapshots; 0 writes them only on shutdown
+    /// and on request.
+    pub snapshot_interval_secs: u64,
+    /// Snapshots kept (the newest good ones); at least 1.
+    pub snapshot_keep: u32,
+    /// Whether to restore the newest good snapshot at start.
+    pub restore: bool,
+    /// Whether to take batches over iceoryx2 shared memory from actors on
+    /// this host (beside gRPC).
+    pub shm_ingest: bool,
+}
+
+impl Default for ReplayConfig {
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 50051)),
+            table: "transitions".to_owned(),
+            capacity: 1_000_000,
+            alpha: 0.6,
+            min_priority: 1e-6,
+            weight_normalization: WeightNormalization::Table,
+            min_size_to_sample: 1_000,
+            samples_per_insert: 0.0,
+            rate_tolerance: 1_000.0,
+            insert_timeout_ms: 30_000,
+            sample_timeout_ms: 10_000,
+            max_message_bytes: 64 << 20,
+            max_batch_transitions: 16_384,
+            max_sample_batch: 4_096,
+            seed: 1,
+            snapshot_dir: None,
+            snapshot_interval_secs: 300,
+            snapshot_keep: 2,
+            restore: true,
+            shm_ingest: true,
+        }
+    }
+}
+
+/// How roles reach each other.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TransportConfig {
+    /// The replay server as clients (actors, learner) reach it, e.g.
+    /// `http://replay:50051`.
+    pub replay_endpoint: String,
+    /// Longest wait for a connection, milliseconds.
+    pub connect_timeout_ms: u64,
+    /// Longest wait for an answer to a unary call, milliseconds.
+    pub request_timeout_ms: u64,
+    /// First wait before retrying a failed call, milliseconds; doubled on
+    /// each failure up to `max_backoff_ms`.
+    pub initial_backoff_ms: u64,
+    /// Longest wait between retries, milliseconds.
+    pub max_backoff_ms: u64,
+    /// Prefix of iceoryx2 service names; processes that talk over shared
+    /// memory must agree on it (and share /dev/shm and /tmp/iceoryx2).
+    pub shm_prefix: String,
+    /// Largest number of publishers (actor processes) per shared-memory
+    /// service.
+    pub shm_max_publishers: usize,
+    /// Batches a subscriber's queue holds before publishers wait.
+    pub shm_buffer: usize,
+    /// First size of a publisher's shared-memory slot, bytes; slots grow
+    /// for bigger batches.
+    pub shm_initial_batch_bytes: usize,
+    /// Longest a publisher waits for room in a full queue before the send
+    /// fails, milliseconds.
+    pub shm_send_timeout_ms: u64,
+}
+
+impl Default for TransportConfig {
+    fn default() -> Self {
+        Self {
+            replay_endpoint: "http://127.0.0.1:50051".to_owned(),
+            connect_timeout_ms: 5_000,
+            request_timeout_ms: 30_000,
+            initial_backoff_ms: 100,
+            max_backoff_ms: 5_000,
+            shm_prefix: "crossroads".to_owned(),
+            shm_max_publishers: 64,
+            shm_buffer: 64,
+            shm_initial_batch_bytes: 64 << 10,
+            shm_send_timeout_ms: 5_000,
+        }
+    }
+}
+
 impl Config {
     /// Checks values that the types alone cannot: ranges and relations.
     /// Returns every problem found, each with its dotted key.
@@ -110,6 +260,139 @@ impl Config {
             format!(
                 "must be at most 1024 (0 = one per core), got {}",
                 rt.compute_threads
+            ),
+        );
+
+        let r = &self.replay;
+        check(
+            !r.table.is_empty() && r.table.len() <= 64,
+            "replay.table",
+            format!("must be 1 to 64 characters, got {:?}", r.table),
+        );
+        check(
+            (1..=100_000_000).contains(&r.capacity),
+            "replay.capacity",
+            format!("must be between 1 and 100000000, got {}", r.capacity),
+        );
+        check(
+            (0.0..=1.0).contains(&r.alpha),
+            "replay.alpha",
+            format!("must be between 0 and 1, got {}", r.alpha),
+        );
+        check(
+            r.min_priority > 0.0 && r.min_priority.is_finite(),
+            "replay.min_priority",
+            format!("must be finite and above 0, got {}", r.min_priority),
+        );
+        check(
+            r.samples_per_insert >= 0.0 && r.samples_per_insert.is_finite(),
+            "replay.samples_per_insert",
+            format!(
+                "must be finite and at least 0 (0 = off), got {}",
+                r.samples_per_insert
+            ),
+        );
+        let min_tolerance = r.samples_per_insert.max(1.0);
+        check(
+            r.samples_per_insert == 0.0
+                || (r.rate_tolerance >= min_tolerance && r.rate_tolerance.is_finite()),
+            "replay.rate_tolerance",
+            format!(
+                "must be at least max(1, replay.samples_per_insert) = {min_tolerance}, got {}",
+                r.rate_tolerance
+            ),
+        );
+        for (key, value) in [
+            ("replay.insert_timeout_ms", r.insert_timeout_ms),
+            ("replay.sample_timeout_ms", r.sample_timeout_ms),
+        ] {
+            check(
+                (1..=3_600_000).contains(&value),
+                key,
+                format!("must be between 1 and 3600000, got {value}"),
+            );
+        }
+        check(
+            (64 << 10..=1 << 30).contains(&r.max_message_bytes),
+            "replay.max_message_bytes",
+            format!(
+                "must be between 65536 and 1073741824, got {}",
+                r.max_message_bytes
+            ),
+        );
+        check(
+            r.max_batch_transitions >= 1,
+            "replay.max_batch_transitions",
+            "must be at least 1".to_owned(),
+        );
+        check(
+            (1..=1 << 20).contains(&r.max_sample_batch),
+            "replay.max_sample_batch",
+            format!("must be between 1 and 1048576, got {}", r.max_sample_batch),
+        );
+        check(
+            r.snapshot_keep >= 1,
+            "replay.snapshot_keep",
+            "must be at least 1".to_owned(),
+        );
+
+        let t = &self.transport;
+        check(
+            t.replay_endpoint.starts_with("http://") || t.replay_endpoint.starts_with("https://"),
+            "transport.replay_endpoint",
+            format!(
+                "must be an http:// or https:// URL, got {:?}",
+                t.replay_endpoint
+            ),
+        );
+        for (key, value) in [
+            ("transport.connect_timeout_ms", t.connect_timeout_ms),
+            ("transport.request_timeout_ms", t.request_timeout_ms),
+            ("transport.initial_backoff_ms", t.initial_backoff_ms),
+            ("transport.shm_send_timeout_ms", t.shm_send_timeout_ms),
+        ] {
+            check(
+                (1..=3_600_000).contains(&value),
+                key,
+                format!("must be between 1 and 3600000, got {value}"),
+            );
+        }
+        check(
+            t.max_backoff_ms >= t.initial_backoff_ms && t.max_backoff_ms <= 3_600_000,
+            "transport.max_backoff_ms",
+            format!(
+                "must be between transport.initial_backoff_ms ({}) and 3600000, got {}",
+                t.initial_backoff_ms, t.max_backoff_ms
+            ),
+        );
+        check(
+            !t.shm_prefix.is_empty()
+                && t.shm_prefix.len() <= 128
+                && t.shm_prefix
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_./".contains(c)),
+            "transport.shm_prefix",
+            format!(
+                "must be 1 to 128 characters of letters, digits, '-', '_', '.', '/', got {:?}",
+                t.shm_prefix
+            ),
+        );
+        check(
+            (1..=4096).contains(&t.shm_max_publishers),
+            "transport.shm_max_publishers",
+            format!("must be between 1 and 4096, got {}", t.shm_max_publishers),
+        );
+        check(
+            (1..=65_536).contains(&t.shm_buffer),
+            "transport.shm_buffer",
+            format!("must be between 1 and 65536, got {}", t.shm_buffer),
+        );
+        check(
+            (1024..=1 << 30).contains(&t.shm_initial_batch_bytes),
+            "transport.shm_initial_batch_bytes",
+            format!(
+                "must be between 1024 and 1073741824, got {}",
+                t.shm_initial_batch_bytes
             ),
         );
         problems

@@ -1,6 +1,8 @@
 //! Tracing setup: log level from `RUST_LOG` (default `info`), lines as text
 //! or JSON on standard error, so standard output stays free for results.
 
+use std::io::IsTerminal;
+
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::fmt;
 use tracing_subscriber::prelude::*;
@@ -29,7 +31,14 @@ pub fn init_tracing(format: LogFormat) -> Result<(), TelemetryError> {
     let registry = tracing_subscriber::registry().with(filter);
     let result = match format {
         LogFormat::Text => registry
-            .with(fmt::layer().with_writer(std::io::stderr).with_target(true))
+            .with(
+                fmt::layer()
+                    .with_writer(std::io::stderr)
+                    .with_target(true)
+                    // Colours only on a terminal: piped logs (containers,
+                    // collectors, tests) stay plain text.
+                    .with_ansi(std::io::stderr().is_terminal()),
+            )
             .try_init(),
         LogFormat::Json => registry
             .with(

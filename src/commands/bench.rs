@@ -1,4 +1,4 @@
-//! `crossroads bench`: throughput figures measured on this machine.
+//! `crossroads bench`: throughput and memory measured on this machine.
 
 use std::process::ExitCode;
 use std::time::Duration;
@@ -7,17 +7,25 @@ use crossroads_sim::bench_builtin;
 
 use crate::cli::{BenchArgs, BenchTarget};
 
-/// Runs the chosen benchmark and prints what it measured.
+/// Runs the chosen measurement and prints its figures.
 pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
-    match args.target {
-        BenchTarget::Sim => sim(args),
+    match &args.target {
+        BenchTarget::Sim { seconds, json } => sim(*seconds, *json),
+        BenchTarget::Replay {
+            capacity,
+            rounds,
+            json,
+        } => {
+            replay(*capacity, *rounds, *json);
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
 
-fn sim(args: &BenchArgs) -> anyhow::Result<ExitCode> {
-    let min = Duration::from_secs_f64(args.seconds.max(0.1));
+fn sim(seconds: f64, json: bool) -> anyhow::Result<ExitCode> {
+    let min = Duration::from_secs_f64(seconds.max(0.1));
     let figures = bench_builtin(min)?;
-    if args.json {
+    if json {
         println!("{}", serde_json::to_string(&figures)?);
     } else {
         println!(
@@ -33,4 +41,25 @@ fn sim(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+fn replay(capacity: usize, rounds: usize, json: bool) {
+    let r = crossroads_replay::bench::run(capacity, rounds);
+    if json {
+        println!(
+            "{{\"capacity\":{},\"bytes_per_transition\":{:.1},\"inserts_per_sec\":{:.0},\"samples_per_sec\":{:.0}}}",
+            r.capacity, r.bytes_per_transition, r.inserts_per_sec, r.samples_per_sec
+        );
+    } else {
+        println!(
+            "replay table, {} synthetic TTG transitions (3-8 cars)",
+            r.capacity
+        );
+        println!(
+            "  bytes per stored transition   {:.1}",
+            r.bytes_per_transition
+        );
+        println!("  inserts/s (median, batch 64)  {:.0}", r.inserts_per_sec);
+        println!("  samples/s (median, batch 256) {:.0}", r.samples_per_sec);
+    }
 }

@@ -4,4 +4,5 @@ pub mod bench;
 pub mod config;
 pub mod doctor;
 pub mod eval;
+pub mod replay;
 pub mod tune_ttc;

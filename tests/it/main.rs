@@ -2,5 +2,6 @@
 //! one test binary.
 
 mod cli;
+mod replay;
 mod setup_libtorch;
 mod sim_commands;

@@ -23,7 +23,7 @@ fn load(content: &str) -> (tempfile::NamedTempFile, Result<Config, ConfigError>)
     (f, result)
 }
 
-fn problems(err: ConfigError) -> Vec<(String, String, String)> {
+fn problems(err: &ConfigError) -> Vec<(String, String, String)> {
     err.problems()
         .iter()
         .map(|p| (p.origin.clone(), p.key.clone(), p.problem.clone()))
@@ -51,7 +51,7 @@ fn file_values_override_defaults() {
 fn unknown_key_names_file_and_key() {
     let (f, result) = load("[runtime]\nworker_thread = 3\n");
     let err = result.expect_err("unknown key");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p.len(), 1, "{p:?}");
     let (origin, key, problem) = &p[0];
     assert_eq!(key, "runtime.worker_thread");
@@ -67,7 +67,7 @@ fn unknown_key_names_file_and_key() {
 fn unknown_section_names_the_section() {
     let (_f, result) = load("[learnr]\nbatch_size = 3\n");
     let err = result.expect_err("unknown section");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].1, "learnr", "{p:?}");
 }
 
@@ -76,7 +76,7 @@ fn wrong_type_names_file_and_key() {
     let (_f, result) = load("[runtime]\nworker_threads = \"many\"\n");
     let err = result.expect_err("wrong type");
     let message = err.to_string();
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].1, "runtime.worker_threads", "{p:?}");
     assert!(p[0].0.contains("config file"), "{p:?}");
     assert!(p[0].2.contains("invalid type"), "{p:?}");
@@ -87,7 +87,7 @@ fn wrong_type_names_file_and_key() {
 fn out_of_range_value_names_file_key_and_range() {
     let (f, result) = load("[runtime]\nworker_threads = 0\n");
     let err = result.expect_err("out of range");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p.len(), 1, "{p:?}");
     assert_eq!(p[0].1, "runtime.worker_threads");
     assert!(p[0].0.contains(&f.path().display().to_string()), "{p:?}");
@@ -98,7 +98,7 @@ fn out_of_range_value_names_file_key_and_range() {
 fn enum_value_outside_the_choices_is_named() {
     let (_f, result) = load("[telemetry]\nlog_format = \"xml\"\n");
     let err = result.expect_err("bad enum");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].1, "telemetry.log_format", "{p:?}");
     assert!(p[0].2.contains("xml"), "{p:?}");
 }
@@ -120,7 +120,7 @@ fn set_overrides_file_and_errors_name_the_command_line() {
         .sets(["runtime.worker_threads=999"])
         .load()
         .expect_err("out of range from --set");
-    let p = problems(err);
+    let p = problems(&err);
     assert_eq!(p[0].0, "command line", "{p:?}");
     assert_eq!(p[0].1, "runtime.worker_threads");
 
@@ -165,4 +165,59 @@ fn rendered_config_loads_back_identically() {
     let (_f, result) = load(&config.to_toml());
     let back = result.expect("round trip");
     assert_eq!(config, back);
+}
+
+#[test]
+fn replay_and_transport_sections_have_valid_defaults_and_checked_ranges() {
+    let config = ConfigLoader::new().without_env().load().expect("defaults");
+    assert_eq!(config.replay.capacity, 1_000_000);
+    assert_eq!(config.transport.replay_endpoint, "http://127.0.0.1:50051");
+
+    let err = ConfigLoader::new()
+        .without_env()
+        .sets([
+            "replay.capacity=0",
+            "replay.alpha=1.5",
+            "replay.samples_per_insert=8.0",
+            "replay.rate_tolerance=2.0",
+            "transport.replay_endpoint=replay:50051",
+        ])
+        .load()
+        .expect_err("out of range");
+    let keys: Vec<String> = problems(&err).into_iter().map(|p| p.1).collect();
+    for key in [
+        "replay.capacity",
+        "replay.alpha",
+        "replay.rate_tolerance",
+        "transport.replay_endpoint",
+    ] {
+        assert!(keys.iter().any(|k| k == key), "{key} missing from {keys:?}");
+    }
+
+    let f = toml_file(
+        "[replay]\ncapacity = 5\nsnapshot_dir = \"/tmp/x\"\n[transport]\nshm_prefix = \"bad prefix\"\n",
+    );
+    let err = ConfigLoader::new()
+        .without_env()
+        .file(Some(f.path()))
+        .load()
+        .expect_err("bad prefix");
+    let p = problems(&err);
+    assert_eq!(p.len(), 1, "{p:?}");
+    assert_eq!(p[0].1, "transport.shm_prefix");
+    assert!(p[0].0.contains("config file"), "{p:?}");
+
+    let config = ConfigLoader::new()
+        .without_env()
+        .flag("replay.capacity", 5000u64)
+        .flag("replay.snapshot_dir", "/var/lib/replay")
+        .flag("replay.listen", "0.0.0.0:0")
+        .load()
+        .expect("flags");
+    assert_eq!(config.replay.capacity, 5000);
+    assert_eq!(
+        config.replay.snapshot_dir.as_deref(),
+        Some(std::path::Path::new("/var/lib/replay"))
+    );
+    assert_eq!(config.replay.listen.port(), 0);
 }

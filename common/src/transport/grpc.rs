@@ -1,0 +1,397 @@
+//! The replay server's gRPC client, as actors and the learner use it.
+//!
+//! [`ReplayClient`] wraps the generated client: it converts domain batches
+//! to the wire and back (validating what the server sends), bounds every
+//! wait by a timeout, and turns statuses into [`ClientError`]s that say
+//! whether a retry can help. [`InsertStream`] is one streaming insert: send
+//! batches, receive an acknowledgement per batch once its transitions are in
+//! the table.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use crossroads_proto::v1 as pb;
+use crossroads_proto::v1::replay_client::ReplayClient as PbClient;
+use tokio::sync::mpsc;
+use tonic::transport::{Channel, Endpoint};
+
+use crate::batch::{BatchError, TransitionBatch};
+use crate::config::TransportConfig;
+use crate::wire;
+
+/// Why a replay call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// The endpoint is not a valid URL.
+    #[error("invalid replay endpoint {endpoint:?}: {message}")]
+    Endpoint {
+        /// The endpoint.
+        endpoint: String,
+        /// The parse error.
+        message: String,
+    },
+    /// The server answered with an error status.
+    #[error("replay server: {code:?}: {message}")]
+    Status {
+        /// gRPC status code.
+        code: tonic::Code,
+        /// The server's message (names the field for invalid input).
+        message: String,
+    },
+    /// No answer within the timeout.
+    #[error("replay server did not answer within {0:?}")]
+    Timeout(Duration),
+    /// The insert stream ended (the server closed it or went away).
+    #[error("the insert stream is closed")]
+    Closed,
+    /// The server sent a batch that does not validate.
+    #[error("invalid batch from the replay server: {0}")]
+    InvalidResponse(#[from] BatchError),
+    /// The batch is too large for one message or has too many ids in flight.
+    #[error("invalid request: {0}")]
+    Request(String),
+}
+
+impl ClientError {
+    /// Whether retrying the same call later may succeed (the server is
+    /// down, restarting, busy or rate-limited), as opposed to a request the
+    /// server will always refuse.
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            ClientError::Status { code, .. } => matches!(
+                code,
+                tonic::Code::Unavailable
+                    | tonic::Code::DeadlineExceeded
+                    | tonic::Code::Aborted
+                    | tonic::Code::Unknown
+                    | tonic::Code::Cancelled
+            ),
+            ClientError::Timeout(_) | ClientError::Closed => true,
+            _ => false,
+        }
+    }
+
+    /// The gRPC code, if the server answered.
+    pub fn code(&self) -> Option<tonic::Code> {
+        match self {
+            ClientError::Status { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+}
+
+impl From<tonic::Status> for ClientError {
+    fn from(s: tonic::Status) -> Self {
+        ClientError::Status {
+            code: s.code(),
+            message: s.message().to_owned(),
+        }
+    }
+}
+
+/// A sampled batch: the items, and beside them what the learner needs to
+/// weight the loss and update priorities.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sampled {
+    /// Item keys, in batch order; name them in
+    /// [`ReplayClient::update_priorities`].
+    pub keys: Vec<u64>,
+    /// Importance weights, in batch order, at most 1.
+    pub weights: Vec<f32>,
+    /// Priorities the items had when sampled.
+    pub priorities: Vec<f32>,
+    /// The transitions.
+    pub batch: TransitionBatch,
+}
+
+/// What the server did with a priority update.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PriorityUpdate {
+    /// Keys updated.
+    pub updated: u32,
+    /// Keys of items evicted since they were sampled.
+    pub ignored: u32,
+}
+
+/// The acknowledgement of one inserted batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct InsertAck {
+    /// The id given by [`InsertStream::send`].
+    pub batch_id: u64,
+    /// Transitions stored.
+    pub inserted: u32,
+    /// Table size after the insert.
+    pub table_size: u64,
+}
+
+/// A connection to the replay server, for one table. Cheap to clone
+/// (clones share the HTTP/2 connection).
+#[derive(Debug, Clone)]
+pub struct ReplayClient {
+    inner: PbClient<Channel>,
+    table: String,
+    request_timeout: Duration,
+    max_message_bytes: usize,
+}
+
+impl ReplayClient {
+    /// A client of `config.replay_endpoint`. It connects lazily: a server
+    /// that is not up yet makes calls fail with a retryable error, not this
+    /// constructor. Must be called inside a tokio runtime.
+    pub fn new(config: &TransportConfig, table: &str) -> Result<Self, ClientError> {
+        let endpoint = Endpoint::from_shared(config.replay_endpoint.clone())
+            .map_err(|e| ClientError::Endpoint {
+                endpoint: config.replay_endpoint.clone(),
+                message: e.to_string(),
+            })?
+            .connect_timeout(Duration::from_millis(config.connect_timeout_ms))
+            .tcp_nodelay(true)
+            .http2_keep_alive_interval(Duration::from_secs(10))
+            .keep_alive_timeout(Duration::from_secs(20));
+        let max_message_bytes = 1 << 30;
+        Ok(Self {
+            inner: PbClient::new(endpoint.connect_lazy())
+                .max_decoding_message_size(max_message_bytes)
+                .max_encoding_message_size(max_message_bytes),
+            table: table.to_owned(),
+            request_timeout: Duration::from_millis(config.request_timeout_ms),
+            max_message_bytes,
+        })
+    }
+
+    /// The table this client talks to.
+    pub fn table(&self) -> &str {
+        &self.table
+    }
+
+    async fn bounded<T>(
+        &self,
+        extra: Duration,
+        call: impl Future<Output = Result<tonic::Response<T>, tonic::Status>>,
+    ) -> Result<T, ClientError> {
+        let limit = self.request_timeout + extra;
+        match tokio::time::timeout(limit, call).await {
+            Ok(Ok(response)) => Ok(response.into_inner()),
+            Ok(Err(status)) => Err(status.into()),
+            Err(_) => Err(ClientError::Timeout(limit)),
+        }
+    }
+
+    /// Samples `batch_size` items with importance exponent `beta`, waiting
+    /// at most `wait` for the rate limiter (zero: the server's default).
+    pub async fn sample(
+        &self,
+        batch_size: u32,
+        beta: f32,
+        wait: Duration,
+    ) -> Result<Sampled, ClientError> {
+        let request = pb::SampleRequest {
+            table: self.table.clone(),
+            batch_size,
+            beta,
+            timeout_ms: u32::try_from(wait.as_millis()).unwrap_or(u32::MAX),
+        };
+        let mut inner = self.inner.clone();
+        let response = self.bounded(wait, inner.sample(request)).await?;
+        let batch = response
+            .batch
+            .ok_or_else(|| {
+                BatchError::new(
+                    crate::batch::RejectReason::BadRequest,
+                    "batch",
+                    "missing from the sample response",
+                )
+            })
+            .and_then(wire::batch_from_wire)?;
+        let n = batch.len();
+        if response.keys.len() != n || response.weights.len() != n || response.priorities.len() != n
+        {
+            return Err(BatchError::new(
+                crate::batch::RejectReason::LengthMismatch,
+                "keys",
+                format!(
+                    "{} keys, {} weights, {} priorities for {n} transitions",
+                    response.keys.len(),
+                    response.weights.len(),
+                    response.priorities.len()
+                ),
+            )
+            .into());
+        }
+        Ok(Sampled {
+            keys: response.keys,
+            weights: response.weights,
+            priorities: response.priorities,
+            batch,
+        })
+    }
+
+    /// Sets new priorities (finite, >= 0) of sampled items.
+    pub async fn update_priorities(
+        &self,
+        keys: Vec<u64>,
+        priorities: Vec<f32>,
+    ) -> Result<PriorityUpdate, ClientError> {
+        let request = pb::UpdatePrioritiesRequest {
+            table: self.table.clone(),
+            keys,
+            priorities,
+        };
+        let mut inner = self.inner.clone();
+        let r = self
+            .bounded(Duration::ZERO, inner.update_priorities(request))
+            .await?;
+        Ok(PriorityUpdate {
+            updated: r.updated,
+            ignored: r.ignored,
+        })
+    }
+
+    /// Size, counters and rate-limiter state of the table, as the wire
+    /// carries them.
+    pub async fn info(&self) -> Result<pb::TableInfo, ClientError> {
+        let mut inner = self.inner.clone();
+        let request = pb::InfoRequest {
+            table: self.table.clone(),
+        };
+        self.bounded(Duration::ZERO, inner.info(request)).await
+    }
+
+    /// Asks the server to write a snapshot now; returns its path and size.
+    pub async fn snapshot(&self) -> Result<pb::SnapshotResponse, ClientError> {
+        let mut inner = self.inner.clone();
+        self.bounded(Duration::ZERO, inner.snapshot(pb::SnapshotRequest {}))
+            .await
+    }
+
+    /// Opens a streaming insert with at most `window` batches in flight
+    /// (sent, not acknowledged).
+    pub async fn insert_stream(&self, window: usize) -> Result<InsertStream, ClientError> {
+        let window = window.max(1);
+        let (tx, rx) = mpsc::channel(window);
+        let mut inner = self.inner.clone();
+        let call = inner.insert(tokio_stream::wrappers::ReceiverStream::new(rx));
+        let acks = self.bounded(Duration::ZERO, call).await?;
+        Ok(InsertStream {
+            tx,
+            acks,
+            table: self.table.clone(),
+            next_id: 0,
+            in_flight: VecDeque::new(),
+            window,
+            timeout: self.request_timeout,
+            max_message_bytes: self.max_message_bytes,
+        })
+    }
+
+    /// Inserts one batch on a fresh stream and waits for its
+    /// acknowledgement (convenient, not fast: actors keep a stream open).
+    pub async fn insert(&self, batch: TransitionBatch) -> Result<InsertAck, ClientError> {
+        let mut stream = self.insert_stream(1).await?;
+        stream.send(batch).await?;
+        let ack = stream.next_ack().await?;
+        stream.finish().await?;
+        Ok(ack)
+    }
+}
+
+/// One streaming insert: batches go out, one acknowledgement per batch
+/// comes back in order once the batch is stored. Every wait is bounded by
+/// the request timeout, so a dead server surfaces as an error, never a hang.
+#[derive(Debug)]
+pub struct InsertStream {
+    tx: mpsc::Sender<pb::InsertRequest>,
+    acks: tonic::Streaming<pb::InsertAck>,
+    table: String,
+    next_id: u64,
+    in_flight: VecDeque<u64>,
+    window: usize,
+    timeout: Duration,
+    max_message_bytes: usize,
+}
+
+impl InsertStream {
+    /// Queues `batch`; returns the id its acknowledgement will carry. Fails
+    /// when `window` batches are in flight: take an acknowledgement with
+    /// [`InsertStream::next_ack`] first.
+    pub async fn send(&mut self, batch: TransitionBatch) -> Result<u64, ClientError> {
+        if self.is_full() {
+            return Err(ClientError::Request(format!(
+                "{} batches in flight; take an acknowledgement first",
+                self.window
+            )));
+        }
+        let id = self.next_id;
+        let request = pb::InsertRequest {
+            table: self.table.clone(),
+            batch_id: id,
+            batch: Some(wire::batch_to_wire(batch)),
+        };
+        let size = prost::Message::encoded_len(&request);
+        if size > self.max_message_bytes {
+            return Err(ClientError::Request(format!(
+                "batch is {size} bytes, above {} per message",
+                self.max_message_bytes
+            )));
+        }
+        match tokio::time::timeout(self.timeout, self.tx.send(request)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(_)) => return Err(ClientError::Closed),
+            Err(_) => return Err(ClientError::Timeout(self.timeout)),
+        }
+        self.next_id += 1;
+        self.in_flight.push_back(id);
+        Ok(id)
+    }
+
+    /// Batches sent and not yet acknowledged, oldest first.
+    pub fn in_flight(&self) -> impl Iterator<Item = u64> + '_ {
+        self.in_flight.iter().copied()
+    }
+
+    /// Whether the window is full (the next `send` would fail).
+    pub fn is_full(&self) -> bool {
+        self.in_flight.len() >= self.window
+    }
+
+    /// The next acknowledgement. An error status (invalid batch, rate
+    /// limiter timeout, server shutting down) ends the stream; batches
+    /// still in flight then were not stored.
+    pub async fn next_ack(&mut self) -> Result<InsertAck, ClientError> {
+        if self.in_flight.is_empty() {
+            return Err(ClientError::Request("no batch in flight".to_owned()));
+        }
+        let message = match tokio::time::timeout(self.timeout, self.acks.message()).await {
+            Ok(Ok(Some(ack))) => ack,
+            Ok(Ok(None)) => return Err(ClientError::Closed),
+            Ok(Err(status)) => return Err(status.into()),
+            Err(_) => return Err(ClientError::Timeout(self.timeout)),
+        };
+        if self.in_flight.front() != Some(&message.batch_id) {
+            return Err(ClientError::Request(format!(
+                "acknowledgement for batch {} out of order (expected {:?})",
+                message.batch_id,
+                self.in_flight.front()
+            )));
+        }
+        self.in_flight.pop_front();
+        Ok(InsertAck {
+            batch_id: message.batch_id,
+            inserted: message.inserted,
+            table_size: message.table_size,
+        })
+    }
+
+    /// Closes the stream after the acknowledgements of every batch in
+    /// flight; returns them.
+    pub async fn finish(mut self) -> Result<Vec<InsertAck>, ClientError> {
+        let mut acks = Vec::with_capacity(self.in_flight.len());
+        while !self.in_flight.is_empty() {
+            acks.push(self.next_ack().await?);
+        }
+        drop(self.tx);
+        // The server ends its side once ours is closed.
+        let _ = tokio::time::timeout(self.timeout, self.acks.message()).await;
+        Ok(acks)
+    }
+}

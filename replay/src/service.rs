@@ -1,0 +1,326 @@
+//! The gRPC `crossroads.v1.Replay` service over the server's tables.
+//!
+//! Each call converts its request into domain types at the boundary
+//! ([`crossroads_common::wire`]), rejecting anything invalid with
+//! INVALID_ARGUMENT (RESOURCE_EXHAUSTED when oversized) and a message that
+//! names the field, before any table is touched; every rejection is counted
+//! by reason. Rate-limiter timeouts are DEADLINE_EXCEEDED, a server
+//! shutting down UNAVAILABLE.
+
+use std::collections::BTreeMap;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use crossroads_common::batch::{BatchError, RejectReason};
+use crossroads_common::{Shutdown, wire};
+use crossroads_proto::v1 as pb;
+use tokio::sync::mpsc;
+use tokio_stream::Stream;
+use tokio_stream::wrappers::ReceiverStream;
+use tokio_util::task::TaskTracker;
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::metrics::{ReplayMetrics, Transport};
+use crate::snapshot::Snapshots;
+use crate::table::{PreparedBatch, Table, TableError};
+
+/// Longest wait a sample request may ask for.
+const MAX_SAMPLE_WAIT: Duration = Duration::from_secs(600);
+
+/// Per-call limits, from `[replay]`.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    /// Longest an insert waits for the rate limiter.
+    pub insert_timeout: Duration,
+    /// Default longest wait of a sample.
+    pub sample_timeout: Duration,
+    /// Largest batch, transitions.
+    pub max_batch_transitions: usize,
+    /// Largest sample or priority update, items.
+    pub max_sample_batch: usize,
+}
+
+/// What the service and the shared-memory ingest share.
+#[derive(Debug)]
+pub struct State {
+    /// Tables by name.
+    pub tables: BTreeMap<String, Arc<Table>>,
+    /// The process's replay metrics.
+    pub metrics: ReplayMetrics,
+    /// Snapshot writer, when a directory is configured.
+    pub snapshots: Option<Arc<Snapshots>>,
+    /// Per-call limits.
+    pub limits: Limits,
+    /// Fires when the server stops.
+    pub shutdown: Shutdown,
+    /// Tasks serving insert streams; the server waits for them before its
+    /// last snapshot, so nothing acknowledged is left out of it.
+    pub tasks: TaskTracker,
+}
+
+impl State {
+    /// The table named `name`, or a counted rejection.
+    pub fn table(&self, name: &str) -> Result<&Arc<Table>, BatchError> {
+        self.tables.get(name).ok_or_else(|| {
+            BatchError::new(
+                RejectReason::UnknownTable,
+                "table",
+                format!(
+                    "no table {name:?}; this server has {:?}",
+                    self.tables.keys().collect::<Vec<_>>()
+                ),
+            )
+        })
+    }
+
+    /// Counts a rejection and turns it into a status.
+    pub fn reject(&self, e: &BatchError) -> Status {
+        self.metrics.reject(e.reason);
+        tracing::debug!(reason = %e.reason, error = %e, "rejected input");
+        match e.reason {
+            RejectReason::Oversized => Status::resource_exhausted(e.to_string()),
+            _ => Status::invalid_argument(e.to_string()),
+        }
+    }
+
+    fn status(&self, e: TableError) -> Status {
+        match e {
+            TableError::Invalid(e) => self.reject(&e),
+            TableError::Timeout { .. } => Status::deadline_exceeded(e.to_string()),
+            TableError::ShuttingDown => Status::unavailable(e.to_string()),
+            TableError::Corrupt(_) => Status::data_loss(e.to_string()),
+        }
+    }
+
+    async fn insert(&self, request: pb::InsertRequest) -> Result<pb::InsertAck, Status> {
+        let table = self.table(&request.table).map_err(|e| self.reject(&e))?;
+        let batch = request.batch.ok_or_else(|| {
+            self.reject(&BatchError::new(
+                RejectReason::BadRequest,
+                "batch",
+                "missing",
+            ))
+        })?;
+        if batch.actions.len() > self.limits.max_batch_transitions {
+            return Err(self.reject(&BatchError::new(
+                RejectReason::Oversized,
+                "batch.actions",
+                format!(
+                    "{} transitions, above the server's {} per batch",
+                    batch.actions.len(),
+                    self.limits.max_batch_transitions
+                ),
+            )));
+        }
+        let batch = wire::batch_from_wire(batch).map_err(|e| self.reject(&e.within("batch")))?;
+        let prepared = PreparedBatch::new(batch).map_err(|e| self.reject(&e.within("batch")))?;
+        let done = table
+            .insert(&prepared, self.limits.insert_timeout, &self.shutdown)
+            .await
+            .map_err(|e| self.status(e))?;
+        table
+            .metrics()
+            .inserted(Transport::Grpc, u64::from(done.inserted));
+        Ok(pb::InsertAck {
+            batch_id: request.batch_id,
+            inserted: done.inserted,
+            table_size: done.size,
+        })
+    }
+}
+
+/// The tonic service. Cheap to clone.
+#[derive(Debug, Clone)]
+pub struct ReplayService {
+    state: Arc<State>,
+}
+
+impl ReplayService {
+    /// A service over `state`.
+    pub fn new(state: Arc<State>) -> Self {
+        Self { state }
+    }
+}
+
+type AckStream = Pin<Box<dyn Stream<Item = Result<pb::InsertAck, Status>> + Send>>;
+
+#[tonic::async_trait]
+impl pb::replay_server::Replay for ReplayService {
+    type InsertStream = AckStream;
+
+    async fn insert(
+        &self,
+        request: Request<Streaming<pb::InsertRequest>>,
+    ) -> Result<Response<AckStream>, Status> {
+        let mut incoming = request.into_inner();
+        let (tx, rx) = mpsc::channel(16);
+        let state = self.state.clone();
+        self.state.tasks.spawn(async move {
+            loop {
+                let next = tokio::select! {
+                    next = incoming.message() => next,
+                    _ = state.shutdown.wait() => {
+                        let _ = tx.send(Err(Status::unavailable("the replay server is shutting down"))).await;
+                        break;
+                    }
+                };
+                let request = match next {
+                    Ok(Some(request)) => request,
+                    Ok(None) => break,
+                    Err(status) => {
+                        // tonic refuses messages above the size limit
+                        // before our code sees them.
+                        let status = if status.message().contains("too large") {
+                            state.metrics.reject(RejectReason::Oversized);
+                            Status::resource_exhausted(status.message().to_owned())
+                        } else {
+                            status
+                        };
+                        let _ = tx.send(Err(status)).await;
+                        break;
+                    }
+                };
+                let outcome = state.insert(request).await;
+                let failed = outcome.is_err();
+                if tx.send(outcome).await.is_err() || failed {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    async fn sample(
+        &self,
+        request: Request<pb::SampleRequest>,
+    ) -> Result<Response<pb::SampleResponse>, Status> {
+        let state = &self.state;
+        let r = request.into_inner();
+        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
+        if r.batch_size as usize > state.limits.max_sample_batch {
+            return Err(state.reject(&BatchError::new(
+                RejectReason::Oversized,
+                "batch_size",
+                format!(
+                    "{} is above the server's {}",
+                    r.batch_size, state.limits.max_sample_batch
+                ),
+            )));
+        }
+        if !r.beta.is_finite() {
+            return Err(state.reject(&BatchError::new(
+                RejectReason::BadRequest,
+                "beta",
+                format!("{} is not in [0, 1]", r.beta),
+            )));
+        }
+        let wait = match r.timeout_ms {
+            0 => state.limits.sample_timeout,
+            ms => Duration::from_millis(u64::from(ms)).min(MAX_SAMPLE_WAIT),
+        };
+        let sample = table
+            .sample(
+                r.batch_size as usize,
+                f64::from(r.beta),
+                wait,
+                &state.shutdown,
+            )
+            .await
+            .map_err(|e| state.status(e))?;
+        Ok(Response::new(pb::SampleResponse {
+            keys: sample.keys,
+            weights: sample.weights,
+            priorities: sample.priorities,
+            batch: Some(wire::batch_to_wire(sample.batch)),
+        }))
+    }
+
+    async fn update_priorities(
+        &self,
+        request: Request<pb::UpdatePrioritiesRequest>,
+    ) -> Result<Response<pb::UpdatePrioritiesResponse>, Status> {
+        let state = &self.state;
+        let r = request.into_inner();
+        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
+        if r.keys.len() > state.limits.max_sample_batch {
+            return Err(state.reject(&BatchError::new(
+                RejectReason::Oversized,
+                "keys",
+                format!(
+                    "{} keys, above the server's {}",
+                    r.keys.len(),
+                    state.limits.max_sample_batch
+                ),
+            )));
+        }
+        let done = table
+            .update_priorities(&r.keys, &r.priorities)
+            .map_err(|e| state.status(e))?;
+        Ok(Response::new(pb::UpdatePrioritiesResponse {
+            updated: done.updated,
+            ignored: done.ignored,
+        }))
+    }
+
+    async fn info(
+        &self,
+        request: Request<pb::InfoRequest>,
+    ) -> Result<Response<pb::TableInfo>, Status> {
+        let state = &self.state;
+        let r = request.into_inner();
+        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
+        let s = table.stats();
+        Ok(Response::new(pb::TableInfo {
+            name: s.name,
+            size: s.size,
+            capacity: s.capacity,
+            inserts_total: s.inserts_total,
+            samples_total: s.samples_total,
+            priority_updates_total: s.priority_updates_total,
+            ignored_updates_total: s.ignored_updates_total,
+            rejections_total: state
+                .metrics
+                .rejections()
+                .into_iter()
+                .filter(|(_, n)| *n > 0)
+                .map(|(reason, n)| (reason.to_owned(), n))
+                .collect(),
+            rate_limiter: Some(pb::RateLimiterInfo {
+                min_size_to_sample: s.limiter.min_size_to_sample,
+                samples_per_insert: s.limiter.samples_per_insert,
+                error_tolerance: s.limiter.tolerance,
+                can_sample: s.can_sample,
+                can_insert: s.can_insert,
+                sample_waits_total: s.sample_waits,
+                insert_waits_total: s.insert_waits,
+            }),
+            bytes_stored: s.bytes,
+            last_snapshot_unix_ms: state.metrics.last_snapshot_unix_ms.load(Ordering::SeqCst)
+                as i64,
+        }))
+    }
+
+    async fn snapshot(
+        &self,
+        _request: Request<pb::SnapshotRequest>,
+    ) -> Result<Response<pb::SnapshotResponse>, Status> {
+        let Some(snapshots) = self.state.snapshots.clone() else {
+            return Err(Status::failed_precondition(
+                "snapshots are disabled: the server has no replay.snapshot_dir",
+            ));
+        };
+        let tables: Vec<Arc<Table>> = self.state.tables.values().cloned().collect();
+        let written = tokio::task::spawn_blocking(move || snapshots.write(&tables))
+            .await
+            .map_err(|e| Status::internal(format!("snapshot task failed: {e}")))?
+            .map_err(|e| Status::internal(e.to_string()))?;
+        Ok(Response::new(pb::SnapshotResponse {
+            path: written.path.display().to_string(),
+            items: written.items,
+            bytes: written.bytes,
+            duration_seconds: written.duration.as_secs_f64(),
+        }))
+    }
+}

@@ -1,0 +1,516 @@
+//! Snapshots: every table's content in one versioned, checksummed file,
+//! written atomically and restored at start.
+//!
+//! A snapshot is `snapshot-<seq>.crsnap` in the snapshot directory. It is
+//! written to a temporary file, fsynced, renamed into place, the directory
+//! fsynced, then read back and checked before older snapshots are pruned
+//! (the newest `keep` stay). A crash at any point leaves the previous
+//! snapshots as they were.
+//!
+//! Format, little-endian: a 32-byte header (`CRRPLSNP`, format version
+//! u32, flags u32, body length u64, CRC-32 of the body u32, CRC-32 of the
+//! header's first 28 bytes u32), then the body: the table count, and per
+//! table its name, spec, keys, counters, item columns (oldest first) and
+//! compact observations. A truncated file fails the length check, a
+//! flipped bit a checksum; either is reported with the file's path and the
+//! file is renamed `*.corrupt` at restore, never deleted or overwritten.
+
+use std::fs::{self, File};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crossroads_common::ObservationSpec;
+
+use crate::metrics::ReplayMetrics;
+use crate::table::{Table, TableImage};
+
+/// First bytes of every snapshot.
+pub const MAGIC: &[u8; 8] = b"CRRPLSNP";
+/// Version of the format written.
+pub const FORMAT_VERSION: u32 = 1;
+const HEADER_LEN: usize = 32;
+const PREFIX: &str = "snapshot-";
+const SUFFIX: &str = ".crsnap";
+
+/// Why a snapshot could not be written or read.
+#[derive(Debug, thiserror::Error)]
+pub enum SnapshotError {
+    /// A file operation failed.
+    #[error("snapshot {}: {what}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// What was being done.
+        what: &'static str,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not a valid snapshot.
+    #[error("snapshot {} is corrupt: {problem}", path.display())]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong: truncated, checksum mismatch, unknown version...
+        problem: String,
+    },
+    /// Snapshots exist but none is valid; starting empty would silently
+    /// lose them.
+    #[error(
+        "no valid snapshot in {}: {}; move the files away or set replay.restore = false to start empty",
+        dir.display(),
+        problems.join("; ")
+    )]
+    NoValidSnapshot {
+        /// The directory.
+        dir: PathBuf,
+        /// Each corrupt file and its problem.
+        problems: Vec<String>,
+    },
+}
+
+fn io(path: &Path, what: &'static str) -> impl FnOnce(std::io::Error) -> SnapshotError {
+    let path = path.to_path_buf();
+    move |source| SnapshotError::Io { path, what, source }
+}
+
+/// What a written snapshot holds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Written {
+    /// Its path.
+    pub path: PathBuf,
+    /// Items across tables.
+    pub items: u64,
+    /// File size.
+    pub bytes: u64,
+    /// Time from the first copy to the rename.
+    pub duration: Duration,
+}
+
+/// Encodes table images into a snapshot file's bytes (header and body).
+pub fn encode(tables: &[(String, TableImage)]) -> Vec<u8> {
+    let mut body = Vec::new();
+    put_u32(&mut body, tables.len() as u32);
+    for (name, t) in tables {
+        put_str(&mut body, name);
+        match &t.spec {
+            Some((spec, actions)) => {
+                body.push(1);
+                put_str(&mut body, &spec.kind);
+                put_u32(&mut body, spec.shape.len() as u32);
+                spec.shape.iter().for_each(|d| put_u32(&mut body, *d));
+                put_u32(&mut body, *actions);
+            }
+            None => body.push(0),
+        }
+        for v in [
+            t.next_key,
+            t.inserts_total,
+            t.samples_total,
+            t.priority_updates_total,
+            t.ignored_updates_total,
+            t.limiter_counts.0,
+            t.limiter_counts.1,
+            t.len() as u64,
+        ] {
+            put_u64(&mut body, v);
+        }
+        t.actions.iter().for_each(|v| put_u32(&mut body, *v));
+        for column in [&t.rewards, &t.discounts, &t.priorities] {
+            column.iter().for_each(|v| put_u32(&mut body, v.to_bits()));
+        }
+        t.observation.iter().for_each(|v| put_u32(&mut body, *v));
+        t.next_observation
+            .iter()
+            .for_each(|v| put_u32(&mut body, *v));
+        put_u64(&mut body, t.observation_offsets.len() as u64);
+        t.observation_offsets
+            .iter()
+            .for_each(|v| put_u64(&mut body, *v));
+        put_u64(&mut body, t.observation_data.len() as u64);
+        body.extend_from_slice(&t.observation_data);
+    }
+    let mut file = Vec::with_capacity(HEADER_LEN + body.len());
+    file.extend_from_slice(MAGIC);
+    put_u32(&mut file, FORMAT_VERSION);
+    put_u32(&mut file, 0);
+    put_u64(&mut file, body.len() as u64);
+    put_u32(&mut file, crc32fast::hash(&body));
+    let header_crc = crc32fast::hash(&file);
+    put_u32(&mut file, header_crc);
+    file.extend_from_slice(&body);
+    file
+}
+
+/// Decodes a snapshot file's bytes; every length is checked, so a damaged
+/// file is an error (naming the problem), never a panic or a huge
+/// allocation.
+pub fn decode(bytes: &[u8]) -> Result<Vec<(String, TableImage)>, String> {
+    if bytes.len() < HEADER_LEN {
+        return Err(format!(
+            "truncated: {} bytes, shorter than the header",
+            bytes.len()
+        ));
+    }
+    let (header, body) = bytes.split_at(HEADER_LEN);
+    if &header[..8] != MAGIC {
+        return Err("not a crossroads replay snapshot (bad magic)".to_owned());
+    }
+    let mut h = Reader::new(&header[8..]);
+    let version = h.u32()?;
+    let _flags = h.u32()?;
+    let body_len = h.u64()?;
+    let body_crc = h.u32()?;
+    let header_crc = h.u32()?;
+    if crc32fast::hash(&header[..28]) != header_crc {
+        return Err("header checksum mismatch".to_owned());
+    }
+    if version != FORMAT_VERSION {
+        return Err(format!(
+            "format version {version}, this build reads {FORMAT_VERSION}"
+        ));
+    }
+    if body.len() as u64 != body_len {
+        return Err(format!(
+            "truncated or extended: body is {} bytes, the header says {body_len}",
+            body.len()
+        ));
+    }
+    if crc32fast::hash(body) != body_crc {
+        return Err("body checksum mismatch".to_owned());
+    }
+    let mut r = Reader::new(body);
+    let n_tables = r.u32()?;
+    let mut tables = Vec::new();
+    for _ in 0..n_tables {
+        let name = r.str()?;
+        let spec = match r.u8()? {
+            0 => None,
+            1 => {
+                let kind = r.str()?;
+                let rank = r.u32()? as usize;
+                let shape = r.u32s(rank)?;
+                let actions = r.u32()?;
+                Some((ObservationSpec::new(kind, shape), actions))
+            }
+            other => return Err(format!("table {name}: bad spec flag {other}")),
+        };
+        let mut image = TableImage {
+            spec,
+            next_key: r.u64()?,
+            inserts_total: r.u64()?,
+            samples_total: r.u64()?,
+            priority_updates_total: r.u64()?,
+            ignored_updates_total: r.u64()?,
+            limiter_counts: (r.u64()?, r.u64()?),
+            ..TableImage::default()
+        };
+        let n = r.len(4 * 6)?;
+        image.actions = r.u32s(n)?;
+        image.rewards = r.f32s(n)?;
+        image.discounts = r.f32s(n)?;
+        image.priorities = r.f32s(n)?;
+        image.observation = r.u32s(n)?;
+        image.next_observation = r.u32s(n)?;
+        let n_obs = r.len(8)?;
+        image.observation_offsets = (0..n_obs).map(|_| r.u64()).collect::<Result<_, _>>()?;
+        let data_len = r.len(1)?;
+        image.observation_data = r.bytes(data_len)?.to_vec();
+        let mut previous = 0;
+        for (i, off) in image.observation_offsets.iter().enumerate() {
+            if *off < previous || *off > data_len as u64 {
+                return Err(format!("table {name}: observation offset {i} out of order"));
+            }
+            previous = *off;
+        }
+        tables.push((name, image));
+    }
+    if r.remaining() != 0 {
+        return Err(format!("{} bytes after the last table", r.remaining()));
+    }
+    Ok(tables)
+}
+
+/// Reads and checks one snapshot file.
+pub fn read(path: &Path) -> Result<Vec<(String, TableImage)>, SnapshotError> {
+    let mut bytes = Vec::new();
+    File::open(path)
+        .and_then(|mut f| f.read_to_end(&mut bytes))
+        .map_err(io(path, "reading"))?;
+    decode(&bytes).map_err(|problem| SnapshotError::Corrupt {
+        path: path.to_path_buf(),
+        problem,
+    })
+}
+
+/// A restored snapshot: its path and its tables by name.
+pub type Restored = (PathBuf, Vec<(String, TableImage)>);
+
+/// Writes and restores the server's snapshots in one directory.
+#[derive(Debug)]
+pub struct Snapshots {
+    dir: PathBuf,
+    keep: usize,
+    metrics: ReplayMetrics,
+    /// One writer at a time (periodic, on request, at shutdown).
+    writing: std::sync::Mutex<()>,
+}
+
+impl Snapshots {
+    /// Snapshots in `dir` (created if missing), keeping the newest `keep`.
+    pub fn new(dir: PathBuf, keep: usize, metrics: ReplayMetrics) -> Result<Self, SnapshotError> {
+        fs::create_dir_all(&dir).map_err(io(&dir, "creating the directory"))?;
+        // Temporary files of a write that crashed are never valid snapshots.
+        for entry in fs::read_dir(&dir).map_err(io(&dir, "listing"))?.flatten() {
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            if name.starts_with(&format!(".{PREFIX}")) && name.ends_with(".tmp") {
+                let _ = fs::remove_file(entry.path());
+            }
+        }
+        Ok(Self {
+            dir,
+            keep: keep.max(1),
+            metrics,
+            writing: std::sync::Mutex::new(()),
+        })
+    }
+
+    /// The directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Snapshot files by sequence number, newest first.
+    fn list(&self) -> Result<Vec<(u64, PathBuf)>, SnapshotError> {
+        let mut found = Vec::new();
+        for entry in fs::read_dir(&self.dir).map_err(io(&self.dir, "listing"))? {
+            let entry = entry.map_err(io(&self.dir, "listing"))?;
+            let name = entry.file_name();
+            let Some(name) = name.to_str() else { continue };
+            if let Some(seq) = name
+                .strip_prefix(PREFIX)
+                .and_then(|s| s.strip_suffix(SUFFIX))
+                .and_then(|s| s.parse::<u64>().ok())
+            {
+                found.push((seq, entry.path()));
+            }
+        }
+        found.sort_by_key(|(seq, _)| std::cmp::Reverse(*seq));
+        Ok(found)
+    }
+
+    fn next_seq(&self) -> Result<u64, SnapshotError> {
+        let mut max = self.list()?.first().map_or(0, |(s, _)| *s);
+        // Corrupt files renamed aside keep their number out of reuse.
+        for entry in fs::read_dir(&self.dir)
+            .map_err(io(&self.dir, "listing"))?
+            .flatten()
+        {
+            if let Some(seq) = entry
+                .file_name()
+                .to_str()
+                .and_then(|n| n.strip_prefix(PREFIX))
+                .and_then(|n| n.split('.').next())
+                .and_then(|n| n.parse::<u64>().ok())
+            {
+                max = max.max(seq);
+            }
+        }
+        Ok(max + 1)
+    }
+
+    /// Writes every table to a new snapshot, atomically; prunes older ones
+    /// once the new one reads back valid. Blocking: call it off the async
+    /// runtime (`spawn_blocking`).
+    pub fn write(&self, tables: &[Arc<Table>]) -> Result<Written, SnapshotError> {
+        let _one_at_a_time = self.writing.lock().unwrap_or_else(|p| p.into_inner());
+        let start = Instant::now();
+        let result = self.write_inner(tables, start);
+        match &result {
+            Ok(w) => {
+                self.metrics.snapshots.with_label_values(&["ok"]).inc();
+                self.metrics.snapshot_duration.set(w.duration.as_secs_f64());
+                self.metrics.snapshot_bytes.set(w.bytes as i64);
+                self.metrics.snapshot_done();
+                tracing::info!(path = %w.path.display(), items = w.items, bytes = w.bytes,
+                    seconds = w.duration.as_secs_f64(), "snapshot written");
+            }
+            Err(e) => {
+                self.metrics.snapshots.with_label_values(&["error"]).inc();
+                tracing::error!(error = %e, "snapshot failed");
+            }
+        }
+        result
+    }
+
+    fn write_inner(&self, tables: &[Arc<Table>], start: Instant) -> Result<Written, SnapshotError> {
+        let images: Vec<(String, TableImage)> = tables
+            .iter()
+            .map(|t| (t.name().to_owned(), t.image()))
+            .collect();
+        let items = images.iter().map(|(_, i)| i.len() as u64).sum();
+        let bytes = encode(&images);
+        drop(images);
+        let seq = self.next_seq()?;
+        let path = self.dir.join(format!("{PREFIX}{seq:010}{SUFFIX}"));
+        let tmp = self.dir.join(format!(".{PREFIX}{seq:010}.tmp"));
+        let written = (|| {
+            let mut f = File::create(&tmp)?;
+            f.write_all(&bytes)?;
+            f.sync_all()
+        })();
+        if let Err(e) = written {
+            let _ = fs::remove_file(&tmp);
+            return Err(io(&tmp, "writing")(e));
+        }
+        fs::rename(&tmp, &path).map_err(io(&path, "renaming into place"))?;
+        File::open(&self.dir)
+            .and_then(|d| d.sync_all())
+            .map_err(io(&self.dir, "syncing the directory"))?;
+        let duration = start.elapsed();
+        // Only a snapshot that reads back valid may replace older ones.
+        read(&path)?;
+        for (_, old) in self.list()?.into_iter().skip(self.keep) {
+            if let Err(e) = fs::remove_file(&old) {
+                tracing::warn!(path = %old.display(), error = %e, "cannot prune old snapshot");
+            }
+        }
+        Ok(Written {
+            path,
+            items,
+            bytes: bytes.len() as u64,
+            duration,
+        })
+    }
+
+    /// The newest valid snapshot's tables, if any. Corrupt snapshots are
+    /// reported, renamed `*.corrupt` (kept for inspection) and skipped for
+    /// an older valid one; if snapshots exist and none is valid, that is an
+    /// error rather than a silent empty start.
+    pub fn restore_latest(&self) -> Result<Option<Restored>, SnapshotError> {
+        let mut problems = Vec::new();
+        for (_, path) in self.list()? {
+            match read(&path) {
+                Ok(tables) => {
+                    for p in &problems {
+                        tracing::error!(problem = %p, "skipped a corrupt snapshot");
+                    }
+                    self.metrics.snapshot_done();
+                    return Ok(Some((path, tables)));
+                }
+                Err(SnapshotError::Corrupt { path, problem }) => {
+                    tracing::error!(path = %path.display(), %problem, "snapshot is corrupt; renaming it *.corrupt");
+                    let aside = path.with_extension("crsnap.corrupt");
+                    if let Err(e) = fs::rename(&path, &aside) {
+                        tracing::warn!(path = %path.display(), error = %e, "cannot rename corrupt snapshot");
+                    }
+                    problems.push(format!(
+                        "{} ({problem}; now {})",
+                        path.display(),
+                        aside.display()
+                    ));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        if problems.is_empty() {
+            Ok(None)
+        } else {
+            Err(SnapshotError::NoValidSnapshot {
+                dir: self.dir.clone(),
+                problems,
+            })
+        }
+    }
+}
+
+fn put_u32(out: &mut Vec<u8>, v: u32) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+fn put_u64(out: &mut Vec<u8>, v: u64) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+fn put_str(out: &mut Vec<u8>, s: &str) {
+    put_u32(out, s.len() as u32);
+    out.extend_from_slice(s.as_bytes());
+}
+
+/// A bounds-checked cursor.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        Self { bytes, at: 0 }
+    }
+
+    fn remaining(&self) -> usize {
+        self.bytes.len() - self.at
+    }
+
+    fn bytes(&mut self, n: usize) -> Result<&'a [u8], String> {
+        let end = self
+            .at
+            .checked_add(n)
+            .filter(|e| *e <= self.bytes.len())
+            .ok_or_else(|| {
+                format!(
+                    "truncated: {n} bytes wanted at offset {}, {} left",
+                    self.at,
+                    self.remaining()
+                )
+            })?;
+        let s = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+
+    fn u8(&mut self) -> Result<u8, String> {
+        Ok(self.bytes(1)?[0])
+    }
+
+    fn u32(&mut self) -> Result<u32, String> {
+        let b = self.bytes(4)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn u64(&mut self) -> Result<u64, String> {
+        let b = self.bytes(8)?;
+        let mut a = [0; 8];
+        a.copy_from_slice(b);
+        Ok(u64::from_le_bytes(a))
+    }
+
+    /// A count whose items take at least `unit` bytes each: bounded by
+    /// what is left, so a damaged count cannot ask for a huge allocation.
+    fn len(&mut self, unit: usize) -> Result<usize, String> {
+        let n = self.u64()?;
+        if n.saturating_mul(unit as u64) > self.remaining() as u64 {
+            return Err(format!("truncated: a count of {n} exceeds the bytes left"));
+        }
+        Ok(n as usize)
+    }
+
+    fn u32s(&mut self, n: usize) -> Result<Vec<u32>, String> {
+        let b = self.bytes(n.checked_mul(4).ok_or("count overflow")?)?;
+        Ok(b.chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect())
+    }
+
+    fn f32s(&mut self, n: usize) -> Result<Vec<f32>, String> {
+        Ok(self.u32s(n)?.into_iter().map(f32::from_bits).collect())
+    }
+
+    fn str(&mut self) -> Result<String, String> {
+        let n = self.u32()? as usize;
+        let b = self.bytes(n)?;
+        String::from_utf8(b.to_vec()).map_err(|_| "a name is not UTF-8".to_owned())
+    }
+}

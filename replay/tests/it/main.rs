@@ -1,0 +1,8 @@
+//! Integration tests of crossroads-replay, one binary.
+
+mod grpc;
+mod rate_limiter;
+mod shm;
+mod snapshot;
+mod table;
+mod util;

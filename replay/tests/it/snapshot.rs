@@ -1,0 +1,207 @@
+//! Snapshots: round trip, truncation and bit flips detected, fallback to
+//! the last good snapshot, nothing corrupt ever replaces a good one.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use crossroads_common::Shutdown;
+use crossroads_replay::ReplayMetrics;
+use crossroads_replay::snapshot::{self, SnapshotError, Snapshots};
+use crossroads_replay::{Table, TableImage};
+
+use crate::util::{insert, table};
+
+async fn filled() -> Arc<Table> {
+    let t = Arc::new(table(50, 0.6));
+    for b in 0..7 {
+        insert(&t, b * 10, 10, None).await;
+    }
+    t.update_priorities(&[45, 60, 3], &[2.5, 0.25, 9.0])
+        .expect("valid");
+    t.sample(8, 0.5, Duration::from_secs(1), &Shutdown::new())
+        .await
+        .expect("sample");
+    t
+}
+
+fn snapshots(dir: &std::path::Path, keep: usize) -> Snapshots {
+    Snapshots::new(dir.to_path_buf(), keep, ReplayMetrics::unregistered()).expect("dir")
+}
+
+fn files(dir: &std::path::Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("list")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[tokio::test]
+async fn round_trip_restores_items_keys_priorities_and_counters() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let t = filled().await;
+    let s = snapshots(dir.path(), 2);
+    let written = s.write(std::slice::from_ref(&t)).expect("write");
+    assert_eq!(written.items, 50);
+    assert!(written.path.starts_with(dir.path()));
+
+    let (path, images) = s.restore_latest().expect("read").expect("a snapshot");
+    assert_eq!(path, written.path);
+    assert_eq!(images.len(), 1);
+    let (name, image) = &images[0];
+    assert_eq!(name, "t");
+    assert_eq!(image, &t.image());
+
+    let restored = table(50, 0.6);
+    assert_eq!(restored.restore(image).expect("fits"), 0);
+    assert_eq!(restored.image(), t.image());
+    let (a, b) = (restored.stats(), t.stats());
+    assert_eq!(
+        (
+            a.size,
+            a.next_key,
+            a.inserts_total,
+            a.samples_total,
+            a.priority_updates_total,
+            a.ignored_updates_total
+        ),
+        (
+            b.size,
+            b.next_key,
+            b.inserts_total,
+            b.samples_total,
+            b.priority_updates_total,
+            b.ignored_updates_total
+        ),
+    );
+    // Keys go on where they stopped; evicted ones stay ignored.
+    let u = restored
+        .update_priorities(&[19, 20, 69], &[1.0, 1.0, 1.0])
+        .expect("valid");
+    assert_eq!((u.updated, u.ignored), (2, 1));
+    insert(&restored, 500, 5, None).await;
+    assert_eq!(restored.stats().next_key, 75);
+
+    // A smaller table keeps the newest items.
+    let small = table(20, 0.6);
+    assert_eq!(small.restore(image).expect("fits"), 30);
+    assert_eq!(small.image().rewards, image.rewards[30..].to_vec());
+}
+
+#[tokio::test]
+async fn empty_table_round_trips() {
+    let bytes = snapshot::encode(&[("t".to_owned(), TableImage::default())]);
+    let back = snapshot::decode(&bytes).expect("valid");
+    assert_eq!(back, vec![("t".to_owned(), TableImage::default())]);
+}
+
+#[tokio::test]
+async fn truncated_and_bit_flipped_snapshots_are_detected_at_every_byte() {
+    let t = filled().await;
+    let bytes = snapshot::encode(&[("t".to_owned(), t.image())]);
+    for cut in (0..bytes.len()).step_by(7) {
+        let err = snapshot::decode(&bytes[..cut]).expect_err("truncated");
+        assert!(
+            err.contains("truncated") || err.contains("checksum"),
+            "cut at {cut}: {err}"
+        );
+    }
+    for at in (0..bytes.len()).step_by(13) {
+        let mut flipped = bytes.clone();
+        flipped[at] ^= 0x10;
+        assert!(
+            snapshot::decode(&flipped).is_err(),
+            "flip at {at} undetected"
+        );
+    }
+}
+
+#[tokio::test]
+async fn a_corrupt_newest_snapshot_falls_back_to_the_last_good_one() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let t = filled().await;
+    let s = snapshots(dir.path(), 2);
+    let good = s.write(std::slice::from_ref(&t)).expect("first");
+    let good_image = t.image();
+    insert(&t, 900, 5, None).await;
+    let newest = s.write(std::slice::from_ref(&t)).expect("second");
+    assert_eq!(files(dir.path()).len(), 2);
+
+    // Flip one bit in the middle of the newest.
+    let mut bytes = std::fs::read(&newest.path).expect("read");
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 1;
+    std::fs::write(&newest.path, &bytes).expect("write");
+    match snapshot::read(&newest.path) {
+        Err(SnapshotError::Corrupt { path, problem }) => {
+            assert_eq!(path, newest.path);
+            assert!(problem.contains("checksum"), "{problem}");
+        }
+        other => panic!("{other:?}"),
+    }
+
+    let (path, images) = s.restore_latest().expect("fallback").expect("a snapshot");
+    assert_eq!(path, good.path, "the last good one");
+    assert_eq!(images[0].1, good_image);
+    let names = files(dir.path());
+    assert!(
+        names.iter().any(|n| n.ends_with(".crsnap.corrupt")),
+        "kept aside: {names:?}"
+    );
+
+    // The next snapshot takes a new number; the corrupt file is not reused
+    // or overwritten.
+    let third = s.write(std::slice::from_ref(&t)).expect("third");
+    assert_ne!(third.path, newest.path);
+    assert!(
+        files(dir.path())
+            .iter()
+            .any(|n| n.ends_with(".crsnap.corrupt"))
+    );
+}
+
+#[tokio::test]
+async fn only_corrupt_snapshots_stop_the_start_with_a_clear_error() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let t = filled().await;
+    let s = snapshots(dir.path(), 1);
+    let written = s.write(&[t]).expect("write");
+    let len = std::fs::metadata(&written.path).expect("meta").len();
+    let f = std::fs::OpenOptions::new()
+        .write(true)
+        .open(&written.path)
+        .expect("open");
+    f.set_len(len - 100).expect("truncate");
+    drop(f);
+    let err = s.restore_latest().expect_err("nothing valid");
+    let message = err.to_string();
+    assert!(
+        matches!(err, SnapshotError::NoValidSnapshot { .. }),
+        "{err:?}"
+    );
+    assert!(message.contains("truncated"), "{message}");
+    assert!(
+        message.contains(&written.path.display().to_string()),
+        "{message}"
+    );
+    assert!(
+        message.contains("replay.restore"),
+        "says how to go on: {message}"
+    );
+}
+
+#[tokio::test]
+async fn keeps_only_the_newest_snapshots() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let t = filled().await;
+    let s = snapshots(dir.path(), 2);
+    let paths: Vec<_> = (0..4)
+        .map(|_| s.write(std::slice::from_ref(&t)).expect("write").path)
+        .collect();
+    let names = files(dir.path());
+    assert_eq!(names.len(), 2, "{names:?}");
+    for p in &paths[2..] {
+        assert!(p.exists());
+    }
+}

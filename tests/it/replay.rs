@@ -1,0 +1,150 @@
+//! `crossroads replay` as an operator runs it: flags over the config, port
+//! 0, SIGTERM, a snapshot on the way out, restored on the way back in.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use crossroads_common::config::TransportConfig;
+use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_common::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+
+/// Starts the server and returns it with the address it logged.
+fn start(dir: &std::path::Path) -> (Child, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args([
+            "--set",
+            "telemetry.metrics=false",
+            "replay",
+            "--listen",
+            "127.0.0.1:0",
+        ])
+        .args(["--no-shm", "--capacity", "100", "--table", "cli"])
+        .arg("--snapshot-dir")
+        .arg(dir)
+        .env_remove("CROSSROADS_CONFIG")
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn crossroads replay");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if let Some(addr) = line
+                .contains("replay server listening")
+                .then(|| {
+                    line.split_whitespace()
+                        .find_map(|w| w.strip_prefix("addr="))
+                })
+                .flatten()
+            {
+                let _ = tx.send(addr.to_owned());
+            }
+        }
+    });
+    let addr = rx
+        .recv_timeout(Duration::from_secs(30))
+        .expect("the server logs its address");
+    (child, addr)
+}
+
+fn terminate(mut child: Child) {
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(status.success());
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            assert!(status.success(), "exit status {status}");
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn batch() -> TransitionBatch {
+    let mut b = TransitionBatch::new(ObservationSpec::ttg(), 5, ObservationEncoding::SparseF32);
+    let mut grid = vec![0.0; 18 * 26 * 3];
+    let mut current = b.push_observation(&grid);
+    for i in 0..10 {
+        grid[i * 3 + 2] = 1.0;
+        let next = b.push_observation(&grid);
+        b.push(Transition {
+            observation: current,
+            action: (i % 5) as u32,
+            reward: i as f32,
+            discount: 0.99,
+            priority: 1.0,
+            next_observation: next,
+        });
+        current = next;
+    }
+    b
+}
+
+#[test]
+fn replay_serves_until_sigterm_and_restores_its_snapshot() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // A runtime per phase: dropping it closes the client's connection, as a
+    // client process that ends would.
+    let runtime = || {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime")
+    };
+    let (child, addr) = start(dir.path());
+    let transport = TransportConfig {
+        replay_endpoint: format!("http://{addr}"),
+        ..TransportConfig::default()
+    };
+    let ack = runtime()
+        .block_on(async { ReplayClient::new(&transport, "cli")?.insert(batch()).await })
+        .expect("insert");
+    assert_eq!((ack.inserted, ack.table_size), (10, 10));
+    terminate(child);
+    let snapshots: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("list")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".crsnap"))
+        .collect();
+    assert_eq!(snapshots.len(), 1, "one snapshot written at SIGTERM");
+
+    let (child, addr) = start(dir.path());
+    let transport = TransportConfig {
+        replay_endpoint: format!("http://{addr}"),
+        ..TransportConfig::default()
+    };
+    let info = runtime()
+        .block_on(async { ReplayClient::new(&transport, "cli")?.info().await })
+        .expect("info");
+    assert_eq!(
+        (info.size, info.capacity),
+        (10, 100),
+        "restored after a restart"
+    );
+    terminate(child);
+}
+
+#[test]
+fn replay_flags_are_validated_like_the_config() {
+    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["replay", "--capacity", "0", "--no-shm"])
+        .env_remove("CROSSROADS_CONFIG")
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("replay.capacity") && err.contains("command line"),
+        "{err}"
+    );
+}
