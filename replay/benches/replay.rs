@@ -12,10 +12,13 @@ use crossroads_replay::PreparedBatch;
 use crossroads_replay::bench::{SyntheticEpisodes, bench_table, fill};
 
 fn bytes_per_transition() {
+    // `cargo test --all-targets` runs this file once as a smoke test (no
+    // `--bench` argument): keep that quick.
+    let benching = std::env::args().any(|a| a == "--bench");
     let capacity = std::env::var("REPLAY_BENCH_CAPACITY")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(1 << 20);
+        .unwrap_or(if benching { 1 << 20 } else { 1 << 12 });
     let table = bench_table(capacity);
     let mut episodes = SyntheticEpisodes::new(1);
     fill(&table, &mut episodes, 64);
@@ -33,7 +36,8 @@ fn bytes_per_transition() {
 fn benches(c: &mut Criterion) {
     bytes_per_transition();
 
-    let table = bench_table(1 << 18);
+    let benching = std::env::args().any(|a| a == "--bench");
+    let table = bench_table(if benching { 1 << 18 } else { 1 << 12 });
     let mut episodes = SyntheticEpisodes::new(2);
     fill(&table, &mut episodes, 64);
 

@@ -240,10 +240,17 @@ async fn restore(
         return Ok(());
     };
     for (name, image) in images {
+        // Starting without them would prune them with the next snapshots.
         let Some(table) = tables.get(&name) else {
-            tracing::warn!(table = %name, path = %path.display(),
-                "the snapshot holds a table this server does not have; its items are not restored");
-            continue;
+            return Err(ServerError::Restore {
+                table: name,
+                path: path.display().to_string(),
+                problem: format!(
+                    "this server has no such table (it serves {:?}); set replay.table to it, \
+                     or replay.restore = false to start empty",
+                    tables.keys().collect::<Vec<_>>()
+                ),
+            });
         };
         let dropped = table.restore(&image).map_err(|e| ServerError::Restore {
             table: name.clone(),

@@ -185,19 +185,20 @@ impl ObservationStore {
             self.current = Some(index);
         }
         let chunk_index = self.current.unwrap_or_default();
-        let entry = match self.chunks[chunk_index as usize].as_mut() {
-            Some(c) => {
-                let offset = c.data.len() as u32;
-                c.data.extend_from_slice(bytes);
-                c.live += 1;
-                Entry {
-                    chunk: chunk_index,
-                    offset,
-                    len: need as u32,
-                    refs: 1,
-                }
-            }
-            None => unreachable!("the current chunk is allocated above"),
+        // The current chunk is allocated above; `get_or_insert_with` keeps
+        // this total without a panic path.
+        let c = self.chunks[chunk_index as usize].get_or_insert_with(|| Chunk {
+            data: Vec::with_capacity(need.max(CHUNK_BYTES)),
+            live: 0,
+        });
+        let offset = c.data.len() as u32;
+        c.data.extend_from_slice(bytes);
+        c.live += 1;
+        let entry = Entry {
+            chunk: chunk_index,
+            offset,
+            len: need as u32,
+            refs: 1,
         };
         self.live_entries += 1;
         match self.free_entries.pop() {

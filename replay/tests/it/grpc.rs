@@ -496,3 +496,44 @@ async fn many_actors_stream_while_the_learner_samples_and_updates() {
     );
     stop(server, shutdown).await;
 }
+
+#[tokio::test]
+async fn periodic_snapshots_are_written_and_a_renamed_table_refuses_to_start() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = server_config(Some(dir.path()));
+    config.replay.snapshot_interval_secs = 1;
+    let (server, shutdown, registry) = serve(&config).await;
+    client(&server, "t")
+        .insert(batch(0, 5, None))
+        .await
+        .expect("insert");
+    tokio::time::sleep(Duration::from_millis(1600)).await;
+    let info = client(&server, "t").info().await.expect("info");
+    assert!(
+        info.last_snapshot_unix_ms > 0,
+        "a periodic snapshot was written"
+    );
+    let text = crossroads_common::metrics::render(&registry);
+    assert!(
+        !text.contains("crossroads_replay_snapshots_total{result=\"ok\"} 0"),
+        "{text}"
+    );
+    assert!(text.contains("crossroads_replay_snapshot_duration_seconds"));
+    stop(server, shutdown).await;
+
+    // The snapshot's table is not the configured one: refuse, naming both,
+    // rather than start empty and prune the snapshot later.
+    config.replay.table = "renamed".to_owned();
+    let err = crossroads_replay::start(&config, None, Shutdown::new())
+        .await
+        .expect_err("table mismatch");
+    let message = err.to_string();
+    assert!(
+        message.contains("\"t\"") && message.contains("renamed"),
+        "{message}"
+    );
+    config.replay.restore = false;
+    let (server, shutdown, _r) = serve(&config).await;
+    assert_eq!(server.table("renamed").expect("table").stats().size, 0);
+    stop(server, shutdown).await;
+}
