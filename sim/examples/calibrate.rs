@@ -35,6 +35,24 @@ fn main() -> Result<(), SimError> {
         if let Some(v) = env_f("HORIZON") {
             spec.traffic.yield_horizon_s = v;
         }
+        if let Some(v) = env_f("MARGIN") {
+            spec.traffic.yield_margin_s = v;
+        }
+        if let Some(v) = env_f("SIGMA") {
+            spec.traffic.sigma = v;
+        }
+        if let Some(v) = env_f("SPEED_DEV") {
+            spec.traffic.speed_factor_dev = v;
+        }
+        if let Some(v) = env_f("HEADWAY") {
+            spec.traffic.headway = v;
+        }
+        if let Some(v) = env_f("EMISSION") {
+            spec.emission_per_s = v;
+        }
+        if let Some(v) = env_f("EMERGENCY") {
+            spec.traffic.emergency_decel = v;
+        }
         let sc = Arc::new(Scenario::compile(spec)?);
         let creep = sc.spec().occlusion.is_some();
         let set = if creep {

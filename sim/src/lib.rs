@@ -6,9 +6,9 @@
 //! [`Path`]s of straight pieces and arcs, the ego's route with its stop line,
 //! creep limit and goal, traffic and ego parameters, rewards and occluders.
 //! Compiling it finds the [`ConflictZone`] of every lane the ego's route
-//! meets. An [`Env`] runs episodes of a scenario: [`Traffic`] (IDM car
-//! following with Krauss safety and dawdling, emission per lane, drivers
-//! that yield to an ego pulling out), the ego driven by an [`ActionSet`]
+//! meets. An [`Env`] runs episodes of a scenario: [`Traffic`] (improved-IDM
+//! car following with Krauss safety and dawdling, emission per lane,
+//! drivers that brake for an ego in their way), the ego driven by an [`ActionSet`]
 //! (TTG, Sequential, Creep-and-Go; a k-step action is one transition,
 //! [`StepResult`]), oriented-rectangle collisions ([`OrientedRect`]), and
 //! grid observations written into caller buffers ([`ObsSpec`]). A [`Policy`]
@@ -77,12 +77,19 @@
 //! paper's regime (see the scenario files and [`TrafficParams`],
 //! [`EgoParams`] for every value):
 //!
-//! - Drivers take the ego as pulling out once it has chosen *go*, cannot
-//!   stop short of their lane any more, or drives at it faster than a
-//!   creep. A driver who would not clear the conflict 0.5 s before the ego
-//!   arrives stops before it if he can with at most 9 m/s², and otherwise
-//!   drives on; once the ego is in his lane ahead he follows it like a
-//!   leader, braking up to 9 m/s². Occlusion runs switch all of this off.
+//! - Priority drivers never give way in advance. The drivers of a lane
+//!   notice the ego once it has chosen *go*, cannot stop short of their
+//!   lane any more, or drives at it faster than a creep, and react after
+//!   0.5 s ([`TrafficParams::reaction_delay_s`]). Then only a car in the
+//!   way of the ego's passage reacts: one that would neither be clear of
+//!   the ego's path before the ego enters nor arrive after it is out (0.5 s
+//!   margin either side). It slows just enough to pass behind the ego,
+//!   stopping short of the lane if it must ([`give_way_decel`]), with at
+//!   most 4.5 m/s² (SUMO's decel) while the ego is outside its lane and up
+//!   to 9 m/s² once the ego is in it. An ego merging ahead of a car is
+//!   followed like a leader (braking for its entry speed, capped at
+//!   4.5 m/s², until it is in the lane). Occlusion runs switch all of this
+//!   off.
 //! - The ego accelerates at 2.6 m/s² (SUMO's default car), takes turns at
 //!   up to 4 m/s² lateral, and waits 1 m before the road edge (2 m in the
 //!   occlusion family, so that the walls hide the near lane).
@@ -118,7 +125,7 @@ mod tune;
 
 pub use action::{ActionSet, Control, DURATIONS, Intent};
 pub use bench::{BenchFigures, bench_builtin, bench_scenario};
-pub use car_following::{dawdle, idm_accel, krauss_safe_speed};
+pub use car_following::{dawdle, idm_accel, iidm_accel, krauss_safe_speed};
 pub use env::{Ego, Env, EnvConfig, EpisodeMetrics, Outcome, StepResult, TTC_CAP_S};
 pub use error::SimError;
 pub use eval::{
@@ -133,5 +140,5 @@ pub use policy::{Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_p
 pub use render::{RenderView, render_svg};
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};
-pub use traffic::{Car, EgoFoe, Traffic};
+pub use traffic::{Car, EgoConflict, EgoFoe, Traffic, give_way_decel};
 pub use tune::{SweepPoint, TuneReport, default_thresholds, tune_ttc};

@@ -65,11 +65,18 @@ fn idm_follower_stops_at_the_standstill_gap() {
     let mut t = Traffic::new(&sc);
     t.place(&sc, 0, 60.0, 15.0).unwrap();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
-    // An obstacle (a stopped ego) at lane coordinate 130.
-    let foes = [EgoFoe::Occupying {
+    // An obstacle (a stopped ego that merged into the lane) at lane
+    // coordinate 130.
+    let foes = [EgoFoe::Conflict(EgoConflict {
+        lane_in: 125.0,
+        lane_clear: 140.0,
+        t_enter: 0.0,
+        t_exit: 0.0,
+        occupying: true,
         rear: 130.0,
         v: 0.0,
-    }];
+        merge: true,
+    })];
     let mut min_gap = f64::INFINITY;
     for _ in 0..300 {
         t.step(&sc, &foes, &mut rng);
