@@ -93,12 +93,14 @@
 //! - The ego accelerates at 2.6 m/s² (SUMO's default car), takes turns at
 //!   up to 4 m/s² lateral, and waits 1 m before the road edge (2 m in the
 //!   occlusion family, so that the walls hide the near lane).
-//! - Cars enter their lane at their desired speed once IDM's gap for that
-//!   speed is free (emissions wait in a backlog meanwhile). A single lane
-//!   without overtaking carries about 0.5 to 0.6 cars/s under IDM, so
-//!   Challenge's demand of 0.7 is only partly delivered (about 0.51).
+//! - Cars enter their lane at their desired speed, or at the last car's
+//!   speed if that is slower, once the desired gap at that speed is free
+//!   (emissions wait in a backlog meanwhile). The emission probability is
+//!   per lane; Left2 and Challenge read the paper's figure per direction
+//!   and split it over the direction's lanes (0.1 and 0.233 per lane). A
+//!   lane fed 0.7 cars/s would carry about 0.66.
 //!
-
+//! # Determinism
 //!
 //! [`Env::reset`] seeds xoshiro256++ (rand_xoshiro, seeded by splitmix64)
 //! from the seed; every random draw of an episode comes from it, in a fixed

@@ -321,14 +321,14 @@ impl Traffic {
                 .clamp(p.speed_factor_min, p.speed_factor_max)
         });
         let v_desired = lane.speed_limit * factor;
-        // Enter at the desired speed, no closer than IDM's desired gap for
-        // it; until then the emission waits, as SUMO's insertion backlog
-        // does. Entering slower is not allowed: a slow entrance turns into
-        // a jam whose discharge is below Challenge's demand, and it never
-        // clears.
-        let k = 1.0 / (2.0 * (p.accel * p.decel).sqrt());
-        let v = v_desired;
-        let s_star = p.min_gap + (v * p.headway + v * (v - v_lead.min(v)) * k);
+        // Enter at the desired speed, or at the last car's speed if that is
+        // slower (SUMO's departSpeed="max"), no closer than the desired gap
+        // at that speed (and than the Krauss bound needs); until then the
+        // emission waits, as SUMO's insertion backlog does. A faster car
+        // does not wait for the gap it would want at its own speed, so
+        // platoons form at the entrance as they do on the road.
+        let v = v_desired.min(v_lead);
+        let s_star = (p.min_gap + v * p.headway).max(v * p.tau + HARD_GAP);
         if gap < s_star {
             return;
         }

@@ -83,8 +83,10 @@ fn idm_follower_stops_at_the_standstill_gap() {
         min_gap = min_gap.min(130.0 - t.lane(0)[0].s);
     }
     let c = t.lane(0)[0];
-    assert!(c.v < 1e-6, "{c:?}");
-    // IDM comes to rest about s0 = 2.5 m short, never closer than 1 m.
+    // At rest: the improved IDM closes the last centimetres to s0 at a few
+    // cm/s (a (1 - (s0 / gap)^2)), which dawdling mostly cancels.
+    assert!(c.v < 0.03, "{c:?}");
+    // It comes to rest about s0 = 2.5 m short, never closer than 1 m.
     let gap = 130.0 - c.s;
     assert!(
         (1.0..=3.5).contains(&gap) && min_gap >= 1.0,
