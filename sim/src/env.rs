@@ -12,7 +12,7 @@ use crate::error::SimError;
 use crate::geometry::{OrientedRect, Vec2};
 use crate::observation::{self, ObsKind, ObsSpec};
 use crate::occlusion::{OcclusionLayout, line_of_sight};
-use crate::scenario::{ConflictZone, Scenario, ego_rect};
+use crate::scenario::{ConflictZone, Lane, Scenario, ego_rect};
 use crate::traffic::{Car, EgoConflict, EgoFoe, Traffic};
 
 /// Cap on normalized and reported time to collision, s.
@@ -301,12 +301,32 @@ impl Env {
     /// What each lane knows about the ego before this step.
     fn update_foes(&mut self, dt: f64) {
         let sc = Arc::clone(&self.scenario);
-        if !sc.spec().traffic_reacts {
-            return;
-        }
         let tp = &sc.spec().traffic;
         let ep = &sc.spec().ego.params;
         let ego = self.ego;
+        if !sc.spec().traffic_reacts {
+            // Nobody brakes for the ego on its way; only an ego that has
+            // merged into a lane (a car length in) is followed there, as any
+            // leader is.
+            for (i, lane) in sc.lanes().iter().enumerate() {
+                self.foes[i] = EgoFoe::None;
+                let Some(z) = lane.zone else { continue };
+                if z.merge && ego.s >= z.ego_in + ep.length && ego.s <= z.ego_out {
+                    let (rear, v) = self.footprint_on(lane);
+                    self.foes[i] = EgoFoe::Conflict(EgoConflict {
+                        lane_in: z.lane_in,
+                        lane_clear: z.lane_clear(),
+                        t_enter: 0.0,
+                        t_exit: 0.0,
+                        occupying: true,
+                        rear,
+                        v,
+                        merge: true,
+                    });
+                }
+            }
+            return;
+        }
         // Where the ego would stand if it braked now: drivers take it as
         // coming once it can no longer stop short of their lane, has
         // committed, or drives at their lane faster than a creep.
@@ -358,15 +378,7 @@ impl Env {
                 v = reach.min(sc.ego_speed_cap(z.ego_in));
             }
             if inside {
-                rear = f64::INFINITY;
-                for c in self.ego_rect.corners() {
-                    rear = rear.min(lane.coordinate(c));
-                }
-                let lane_dir = match lane.straight {
-                    Some((_, dir, _)) => dir,
-                    None => Vec2::from_angle(lane.path.pose_at(rear).heading),
-                };
-                v = (ego.v * self.ego_rect.axis.dot(lane_dir)).max(0.0);
+                (rear, v) = self.footprint_on(lane);
             }
             self.foes[i] = EgoFoe::Conflict(EgoConflict {
                 lane_in: z.lane_in,
@@ -379,6 +391,23 @@ impl Env {
                 merge: z.merge,
             });
         }
+    }
+
+    /// Smallest lane coordinate of the ego's footprint on `lane`, and the
+    /// ego's speed along the lane (never negative).
+    fn footprint_on(&self, lane: &Lane) -> (f64, f64) {
+        let mut rear = f64::INFINITY;
+        for c in self.ego_rect.corners() {
+            rear = rear.min(lane.coordinate(c));
+        }
+        let lane_dir = match lane.straight {
+            Some((_, dir, _)) => dir,
+            None => Vec2::from_angle(lane.path.pose_at(rear).heading),
+        };
+        (
+            rear,
+            (self.ego.v * self.ego_rect.axis.dot(lane_dir)).max(0.0),
+        )
     }
 
     /// Seconds until the ego's front reaches arc length `target`, as a

@@ -89,7 +89,9 @@
 //!   to 9 m/s² once the ego is in it. An ego merging ahead of a car is
 //!   followed like a leader (braking for its entry speed, capped at
 //!   4.5 m/s², until it is in the lane). Occlusion runs switch all of this
-//!   off.
+//!   off, as the paper does (`traffic_reacts = false`), except that an ego
+//!   that has merged a car length into a lane is followed there like any
+//!   leader rather than driven through.
 //! - The ego accelerates at 2.6 m/s² (SUMO's default car), takes turns at
 //!   up to 4 m/s² lateral, and waits 1 m before the road edge (2 m in the
 //!   occlusion family, so that the walls hide the near lane).

@@ -50,7 +50,9 @@ pub struct ScenarioSpec {
     /// Default probability per second that a lane emits a car.
     pub emission_per_s: f64,
     /// Whether traffic brakes for an ego that occupies or is about to enter
-    /// its lane.
+    /// its lane. Without, nobody brakes for the ego on its way; an ego that
+    /// has merged a car length into a lane is still followed there like any
+    /// leader.
     #[serde(default = "default_true")]
     pub traffic_reacts: bool,
     /// Seconds of traffic simulated before the episode starts, so the road

@@ -206,6 +206,31 @@ fn traffic_brakes_for_a_go_but_not_in_occlusion_runs() {
     assert_eq!(r.outcome, Some(Outcome::Collision));
 }
 
+#[test]
+fn occlusion_traffic_ignores_the_ego_until_it_has_merged() {
+    let mut e = env("occluded", ActionSet::Creep);
+    let z = e.scenario().lanes()[1].zone.unwrap();
+    assert!(z.merge);
+    let run = |e: &mut Env, ego_s: f64| {
+        e.reset(1);
+        e.set_occluders(&[]);
+        e.clear_traffic();
+        // A stopped ego in the far lane; a car 60 m short of the merge.
+        e.set_ego(ego_s, 0.0, false);
+        e.place_car(1, z.lane_in - 60.0, 20.0).unwrap();
+        while !e.is_done() && e.steps() < 100 {
+            e.step(0).unwrap(); // wait
+        }
+        e.outcome()
+    };
+    // Two car lengths in: followed like a leader, the car stops behind it.
+    assert_eq!(run(&mut e, z.ego_in + 10.0), None);
+    let car = e.traffic().lane(1)[0];
+    assert!(car.v < 0.1, "{car:?}");
+    // Only its nose in the lane: nobody brakes for it.
+    assert_eq!(run(&mut e, z.ego_in + 1.0), Some(Outcome::Collision));
+}
+
 // ---------------------------------------------------------------- episodes
 
 #[test]
