@@ -93,8 +93,9 @@
 //!   that has merged a car length into a lane is followed there like any
 //!   leader rather than driven through.
 //! - The ego accelerates at 2.6 m/s² (SUMO's default car), takes turns at
-//!   up to 4 m/s² lateral, and waits 1 m before the road edge (2 m in the
-//!   occlusion family, so that the walls hide the near lane).
+//!   up to 5.5 m/s² lateral (SUMO's junction speed limit), and waits 1 m
+//!   before the road edge (2 m in the occlusion family, so that the walls
+//!   hide the near lane).
 //! - Cars enter their lane at their desired speed, or at the last car's
 //!   speed if that is slower, once the desired gap at that speed is free
 //!   (emissions wait in a backlog meanwhile). The emission probability is

@@ -114,6 +114,8 @@ pub struct EgoParams {
     /// Top speed on the ego's path, m/s.
     pub max_speed: f64,
     /// Largest lateral acceleration in turns; sets the speed on arcs, m/s².
+    /// SUMO's netconvert limits junction speeds to the same 5.5 m/s²
+    /// (`junctions.limit-turn-speed`).
     pub lateral_accel: f64,
     /// Target speed of *creep*, m/s.
     pub creep_speed: f64,
@@ -127,7 +129,7 @@ impl Default for EgoParams {
             accel: 2.6,
             decel: 4.5,
             max_speed: 15.0,
-            lateral_accel: 4.0,
+            lateral_accel: 5.5,
             creep_speed: 1.0,
         }
     }
