@@ -12,8 +12,8 @@ use crate::error::SimError;
 use crate::geometry::{OrientedRect, Vec2};
 use crate::observation::{self, ObsKind, ObsSpec};
 use crate::occlusion::{OcclusionLayout, line_of_sight};
-use crate::scenario::{ConflictZone, Scenario, ego_rect};
-use crate::traffic::{Car, EgoFoe, Traffic};
+use crate::scenario::{ConflictZone, Lane, Scenario, ego_rect};
+use crate::traffic::{Car, EgoConflict, EgoFoe, Traffic};
 
 /// Cap on normalized and reported time to collision, s.
 pub const TTC_CAP_S: f64 = 10.0;
@@ -304,50 +304,110 @@ impl Env {
         let tp = &sc.spec().traffic;
         let ep = &sc.spec().ego.params;
         let ego = self.ego;
-        // Where the ego would stand if it braked now: drivers react once it
-        // can no longer stop short of their lane, has committed, or is
-        // driving at their lane faster than a creep.
-        let stop_s = ego.s + ego.v * ego.v / (2.0 * ep.decel);
-        for (i, lane) in sc.lanes().iter().enumerate() {
-            let mut foe = EgoFoe::None;
-            if let (true, Some(z)) = (sc.spec().traffic_reacts, lane.zone) {
-                if ego.s >= z.ego_in && ego.s <= z.ego_out {
-                    let mut rear = f64::INFINITY;
-                    for c in self.ego_rect.corners() {
-                        rear = rear.min(lane.coordinate(c));
-                    }
-                    let lane_dir = match lane.straight {
-                        Some((_, dir, _)) => dir,
-                        None => Vec2::from_angle(lane.path.pose_at(rear).heading),
-                    };
-                    let v = (ego.v * self.ego_rect.axis.dot(lane_dir)).max(0.0);
-                    foe = EgoFoe::Occupying { rear, v };
-                    self.foe_time[i] = tp.reaction_delay_s;
-                } else if ego.s < z.ego_in
-                    && (ego.committed || stop_s >= z.ego_in || ego.v > ep.creep_speed + 0.5)
-                {
-                    let t_enter = self.ego_arrival(z.ego_in, tp.yield_horizon_s);
-                    // An ego that is neither committed nor unable to stop is
-                    // taken as entering only when it is close to doing so.
-                    let near = ego.committed || stop_s >= z.ego_in || t_enter <= 2.0;
-                    if near && t_enter <= tp.yield_horizon_s {
-                        self.foe_time[i] += dt;
-                        if self.foe_time[i] >= tp.reaction_delay_s {
-                            foe = EgoFoe::Entering {
-                                lane_in: z.lane_in,
-                                lane_clear: z.lane_clear(),
-                                t_enter,
-                            };
-                        }
-                    } else {
-                        self.foe_time[i] = 0.0;
-                    }
-                } else {
-                    self.foe_time[i] = 0.0;
+        if !sc.spec().traffic_reacts {
+            // Nobody brakes for the ego on its way; only an ego that has
+            // merged into a lane (a car length in) is followed there, as any
+            // leader is.
+            for (i, lane) in sc.lanes().iter().enumerate() {
+                self.foes[i] = EgoFoe::None;
+                let Some(z) = lane.zone else { continue };
+                if z.merge && ego.s >= z.ego_in + ep.length && ego.s <= z.ego_out {
+                    let (rear, v) = self.footprint_on(lane);
+                    self.foes[i] = EgoFoe::Conflict(EgoConflict {
+                        lane_in: z.lane_in,
+                        lane_clear: z.lane_clear(),
+                        t_enter: 0.0,
+                        t_exit: 0.0,
+                        occupying: true,
+                        rear,
+                        v,
+                        merge: true,
+                    });
                 }
             }
-            self.foes[i] = foe;
+            return;
         }
+        // Where the ego would stand if it braked now: drivers take it as
+        // coming once it can no longer stop short of their lane, has
+        // committed, or drives at their lane faster than a creep.
+        let stop_s = ego.s + ego.v * ego.v / (2.0 * ep.decel);
+        let moving = ego.committed || ego.v > ep.creep_speed + 0.5;
+        for (i, lane) in sc.lanes().iter().enumerate() {
+            self.foes[i] = EgoFoe::None;
+            let Some(z) = lane.zone else { continue };
+            let inside = ego.s >= z.ego_in && ego.s <= z.ego_out;
+            // A merge is over for the lane's drivers once the ego is a car
+            // length in: from then on it is their leader.
+            let exit_s = if z.merge {
+                z.ego_in + ep.length
+            } else {
+                z.ego_out
+            };
+            let (t_enter, t_exit) =
+                if inside || (ego.s < z.ego_in && (moving || stop_s >= z.ego_in)) {
+                    (
+                        self.ego_arrival(z.ego_in, tp.yield_horizon_s),
+                        self.ego_arrival(exit_s, 2.0 * tp.yield_horizon_s),
+                    )
+                } else {
+                    (f64::INFINITY, f64::INFINITY)
+                };
+            // An ego that is neither committed nor unable to stop is taken
+            // as coming only when it is close to entering.
+            let coming = !inside
+                && t_enter <= tp.yield_horizon_s
+                && (ego.committed || stop_s >= z.ego_in || t_enter <= 2.0);
+            if !(inside || coming) {
+                self.foe_time[i] = 0.0;
+                continue;
+            }
+            // Drivers need their reaction time to notice the ego.
+            self.foe_time[i] += dt;
+            if self.foe_time[i] < tp.reaction_delay_s - 1e-9 {
+                continue;
+            }
+            let (mut rear, mut v) = (z.lane_in, 0.0);
+            if z.merge && !inside {
+                // Full acceleration up to the curve speed limit.
+                let d = z.ego_in - ego.s;
+                let reach = if ego.committed {
+                    (ego.v * ego.v + 2.0 * ep.accel * d).sqrt()
+                } else {
+                    ego.v
+                };
+                v = reach.min(sc.ego_speed_cap(z.ego_in));
+            }
+            if inside {
+                (rear, v) = self.footprint_on(lane);
+            }
+            self.foes[i] = EgoFoe::Conflict(EgoConflict {
+                lane_in: z.lane_in,
+                lane_clear: z.lane_clear(),
+                t_enter: if inside { 0.0 } else { t_enter },
+                t_exit,
+                occupying: inside,
+                rear,
+                v,
+                merge: z.merge,
+            });
+        }
+    }
+
+    /// Smallest lane coordinate of the ego's footprint on `lane`, and the
+    /// ego's speed along the lane (never negative).
+    fn footprint_on(&self, lane: &Lane) -> (f64, f64) {
+        let mut rear = f64::INFINITY;
+        for c in self.ego_rect.corners() {
+            rear = rear.min(lane.coordinate(c));
+        }
+        let lane_dir = match lane.straight {
+            Some((_, dir, _)) => dir,
+            None => Vec2::from_angle(lane.path.pose_at(rear).heading),
+        };
+        (
+            rear,
+            (self.ego.v * self.ego_rect.axis.dot(lane_dir)).max(0.0),
+        )
     }
 
     /// Seconds until the ego's front reaches arc length `target`, as a
@@ -360,11 +420,12 @@ impl Env {
             return 0.0;
         }
         if !ego.committed {
-            return if ego.v > 0.05 {
+            let t = if ego.v > 0.05 {
                 (target - ego.s) / ego.v
             } else {
                 f64::INFINITY
             };
+            return if t <= horizon { t } else { f64::INFINITY };
         }
         let sc = &self.scenario;
         let (dt, a) = (sc.dt(), sc.spec().ego.params.accel);

@@ -23,10 +23,10 @@ pub struct TrafficParams {
     pub sigma: f64,
     /// Reaction time of the Krauss safe speed, s (SUMO's tau).
     pub tau: f64,
-    /// IDM desired time headway `T`, s. Shorter than SUMO's tau because
-    /// IDM's free-road term widens gaps below the desired speed: behind a
-    /// platoon leader at 16.6 m/s a lane then carries about 0.6 cars/s
-    /// (0.45 with 1.0 s), still short of Challenge's demand of 0.7.
+    /// IDM desired time headway `T`, s. Traffic follows the improved IDM
+    /// ([`crate::iidm_accel`]), which keeps this headway in platoons; 0.8 s
+    /// (a little under SUMO's tau of 1 s) gives a lane a capacity of about
+    /// 0.8 cars/s at the platoon speeds seen, 16 to 17 m/s.
     pub headway: f64,
     /// IDM standstill gap `s0`, m (SUMO's minGap).
     pub min_gap: f64,
@@ -40,20 +40,21 @@ pub struct TrafficParams {
     pub speed_factor_min: f64,
     /// Upper clip of the speed factor.
     pub speed_factor_max: f64,
-    /// A car starts yielding to an ego that is moving towards its lane when
-    /// the ego would reach the lane within this many seconds.
+    /// Drivers of a lane take an ego that is moving towards it as coming
+    /// when it would reach the lane within this many seconds.
     pub yield_horizon_s: f64,
-    /// Hardest braking a driver accepts to yield to an ego that is pulling
-    /// out; a driver who would need more drives on, taking the right of
-    /// way. An ego already in the lane ahead is always braked for, with up
-    /// to `emergency_decel`. Default: `emergency_decel`, as SUMO drivers
-    /// brake for a foe on the junction. m/s².
+    /// Hardest braking a driver accepts to give way to an ego that is
+    /// pulling out in front of him (SUMO's comfortable `decel`); a driver
+    /// who would need more drives on, keeping his right of way. Only an ego
+    /// already in his lane is braked for harder, up to `emergency_decel`.
+    /// m/s².
     pub yield_decel: f64,
-    /// A car that would clear the ego's path at least this many seconds
-    /// before the ego arrives does not yield.
+    /// Margin, s, either side of the ego's passage through a lane: a car
+    /// clear of the ego's path this long before the ego enters, or arriving
+    /// this long after it is out, is not in its way.
     pub yield_margin_s: f64,
-    /// Seconds a driver needs to notice that the ego is pulling out before
-    /// braking for it; an ego already inside the lane is reacted to at once.
+    /// Seconds the drivers of a lane need to notice an ego that comes at
+    /// (or into) their lane before they react to it at all.
     pub reaction_delay_s: f64,
     /// A car counts as braking while its intended deceleration (car
     /// following and reaction to the ego, before random dawdling) exceeds
@@ -87,9 +88,9 @@ impl Default for TrafficParams {
             speed_factor_min: 0.2,
             speed_factor_max: 2.0,
             yield_horizon_s: 6.0,
-            yield_decel: 9.0,
+            yield_decel: 4.5,
             yield_margin_s: 0.5,
-            reaction_delay_s: 0.0,
+            reaction_delay_s: 0.5,
             brake_threshold: 1.0,
             brake_zone: 100.0,
             max_pending: 64,
@@ -113,6 +114,8 @@ pub struct EgoParams {
     /// Top speed on the ego's path, m/s.
     pub max_speed: f64,
     /// Largest lateral acceleration in turns; sets the speed on arcs, m/s².
+    /// SUMO's netconvert limits junction speeds to the same 5.5 m/s²
+    /// (`junctions.limit-turn-speed`).
     pub lateral_accel: f64,
     /// Target speed of *creep*, m/s.
     pub creep_speed: f64,
@@ -126,7 +129,7 @@ impl Default for EgoParams {
             accel: 2.6,
             decel: 4.5,
             max_speed: 15.0,
-            lateral_accel: 4.0,
+            lateral_accel: 5.5,
             creep_speed: 1.0,
         }
     }

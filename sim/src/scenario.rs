@@ -50,7 +50,9 @@ pub struct ScenarioSpec {
     /// Default probability per second that a lane emits a car.
     pub emission_per_s: f64,
     /// Whether traffic brakes for an ego that occupies or is about to enter
-    /// its lane.
+    /// its lane. Without, nobody brakes for the ego on its way; an ego that
+    /// has merged a car length into a lane is still followed there like any
+    /// leader.
     #[serde(default = "default_true")]
     pub traffic_reacts: bool,
     /// Seconds of traffic simulated before the episode starts, so the road
@@ -564,14 +566,14 @@ mod tests {
     fn speed_profile_slows_for_turns() {
         let left = Scenario::builtin("left").unwrap();
         let stop = left.spec().ego.stop_line_s;
-        // On the 6.25 m arc: sqrt(4 m/s² x 6.25 m) = 5 m/s.
+        // On the 6.25 m arc: sqrt(5.5 m/s² x 6.25 m) = 5.86 m/s.
         let on_arc = left.ego_speed_cap(stop + 8.0);
-        assert!((on_arc - 5.0).abs() < 1e-9, "{on_arc}");
+        assert!((on_arc - 34.375_f64.sqrt()).abs() < 1e-9, "{on_arc}");
         // Before the arc the ego may be faster, but not so fast that it
         // could not brake down at 3 m/s² in time.
         let before = left.ego_speed_cap(stop - 10.0);
         assert!(
-            before > 5.0 && before * before <= 25.0 + 2.0 * 3.0 * 10.5,
+            before > on_arc && before * before <= 34.375 + 2.0 * 3.0 * 10.5,
             "{before}"
         );
         assert!(left.ego_speed_cap(left.spec().ego.goal_s + 40.0) > 10.0);

@@ -6,9 +6,10 @@ use std::collections::VecDeque;
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
-use crate::car_following::{dawdle, idm_accel, krauss_safe_speed};
+use crate::car_following::{dawdle, iidm_accel, krauss_safe_speed};
 use crate::error::SimError;
 use crate::geometry::{OrientedRect, Vec2};
+use crate::params::TrafficParams;
 use crate::scenario::Scenario;
 
 /// Bumper-to-bumper distance the Krauss bound keeps to a leader even in an
@@ -32,8 +33,8 @@ pub struct Car {
     pub v_desired: f64,
     /// Whether it braked harder than the braking threshold this step.
     pub braking: bool,
-    /// Whether it has decided to give way to the ego pulling out; kept
-    /// until the ego is in its lane or gone, so drivers do not dither.
+    /// Whether it gives way to (or brakes for) the ego; kept while its lane
+    /// knows about the ego, so drivers do not dither.
     pub yielding: bool,
     /// Centre of the car in the world.
     pub pos: Vec2,
@@ -50,31 +51,58 @@ impl Car {
     }
 }
 
-/// What the cars of one lane know about the ego during a step.
+/// What the drivers of one lane know about the ego during a step.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub enum EgoFoe {
-    /// Nothing to react to.
+    /// Nothing to react to: the ego is not on its way into the lane, or
+    /// the drivers have not had their reaction time yet.
     #[default]
     None,
-    /// The ego's footprint overlaps the lane: cars whose front is behind
-    /// `rear` follow it like a leader there, moving at `v` along the lane.
-    Occupying {
-        /// Smallest lane coordinate of the ego's footprint.
-        rear: f64,
-        /// Ego speed projected on the lane, never negative.
-        v: f64,
-    },
-    /// The ego is moving and reaches the lane in `t_enter` seconds. Cars
-    /// before `lane_in` that cannot get their rear past `lane_clear` well
-    /// before then stop at `lane_in`.
-    Entering {
-        /// Where the ego enters, lane coordinate.
-        lane_in: f64,
-        /// What a car's rear must pass to be clear.
-        lane_clear: f64,
-        /// Seconds until the ego enters.
-        t_enter: f64,
-    },
+    /// The ego is about to enter the lane, or is in it.
+    Conflict(EgoConflict),
+}
+
+/// The ego as the drivers of one lane see it once they have noticed it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EgoConflict {
+    /// Smallest lane coordinate the ego's footprint covers on its way
+    /// through the lane; drivers who give way stop short of it.
+    pub lane_in: f64,
+    /// What a car's rear must pass to be clear of the ego's path.
+    pub lane_clear: f64,
+    /// Seconds until the ego's footprint enters the lane; 0 once it has.
+    pub t_enter: f64,
+    /// Seconds until the ego is out of the lane (a crossing) or one car
+    /// length into it (a merge, after which cars simply follow it);
+    /// infinite when the ego is not expected to get there (stopped).
+    pub t_exit: f64,
+    /// The ego's footprint overlaps the lane now.
+    pub occupying: bool,
+    /// Smallest lane coordinate of the ego's footprint now (when
+    /// occupying).
+    pub rear: f64,
+    /// Ego speed projected on the lane, never negative, when occupying;
+    /// before a merge, the speed it will enter the lane with.
+    pub v: f64,
+    /// The ego ends its route in this lane: once in, it is a leader.
+    pub merge: bool,
+}
+
+/// Constant deceleration, m/s², that makes a car at speed `v` reach a point
+/// `room` metres ahead no earlier than `t` seconds from now, stopping short
+/// of it if it must. Negative when it may even speed up; infinite when it
+/// is already there.
+pub fn give_way_decel(v: f64, room: f64, t: f64) -> f64 {
+    if room <= 0.0 {
+        return if v > 0.0 { f64::INFINITY } else { 0.0 };
+    }
+    if t.is_finite() && v * t <= 2.0 * room {
+        // Slows to arrive exactly at t without stopping: room = v t - d t^2 / 2.
+        2.0 * (v * t - room) / (t * t)
+    } else {
+        // Stops exactly at the point.
+        v * v / (2.0 * room)
+    }
 }
 
 /// All traffic cars, lane by lane, downstream first.
@@ -194,37 +222,10 @@ impl Traffic {
                     Some((ls, lv)) => (ls - len - car.s, lv),
                     None => (f64::INFINITY, 0.0),
                 };
-                let mut a = idm_accel(car.v, car.v_desired, gap, v_lead, p);
+                let mut a = iidm_accel(car.v, car.v_desired, gap, v_lead, p);
                 match foe {
-                    EgoFoe::Occupying { rear, v } if car.s < rear => {
-                        a = a.min(idm_accel(car.v, car.v_desired, rear - car.s, v, p));
-                    }
-                    EgoFoe::Entering {
-                        lane_in,
-                        lane_clear,
-                        t_enter,
-                    } if car.s < lane_in => {
-                        if !car.yielding {
-                            let t_clear = if car.v > 0.1 {
-                                (lane_clear + len - car.s) / car.v
-                            } else {
-                                f64::INFINITY
-                            };
-                            let room = lane_in - car.s - HARD_GAP;
-                            let needed = if room > 0.0 {
-                                car.v * car.v / (2.0 * room)
-                            } else {
-                                f64::INFINITY
-                            };
-                            car.yielding =
-                                t_clear + p.yield_margin_s > t_enter && needed <= p.yield_decel;
-                        }
-                        if car.yielding {
-                            a = a.min(idm_accel(car.v, car.v_desired, lane_in - car.s, 0.0, p));
-                        }
-                    }
+                    EgoFoe::Conflict(c) => a = a.min(react(car, &c, p)),
                     EgoFoe::None => car.yielding = false,
-                    _ => {}
                 }
                 let floor = (car.v - p.emergency_decel * dt).max(0.0);
                 let mut v_new = (car.v + a.max(-p.emergency_decel) * dt).max(0.0);
@@ -320,14 +321,14 @@ impl Traffic {
                 .clamp(p.speed_factor_min, p.speed_factor_max)
         });
         let v_desired = lane.speed_limit * factor;
-        // Enter at the desired speed, no closer than IDM's desired gap for
-        // it; until then the emission waits, as SUMO's insertion backlog
-        // does. Entering slower is not allowed: a slow entrance turns into
-        // a jam whose discharge is below Challenge's demand, and it never
-        // clears.
-        let k = 1.0 / (2.0 * (p.accel * p.decel).sqrt());
-        let v = v_desired;
-        let s_star = p.min_gap + (v * p.headway + v * (v - v_lead.min(v)) * k);
+        // Enter at the desired speed, or at the last car's speed if that is
+        // slower (SUMO's departSpeed="max"), no closer than the desired gap
+        // at that speed (and than the Krauss bound needs); until then the
+        // emission waits, as SUMO's insertion backlog does. A faster car
+        // does not wait for the gap it would want at its own speed, so
+        // platoons form at the entrance as they do on the road.
+        let v = v_desired.min(v_lead);
+        let s_star = (p.min_gap + v * p.headway).max(v * p.tau + HARD_GAP);
         if gap < s_star {
             return;
         }
@@ -350,6 +351,60 @@ impl Traffic {
         place(&mut car, lane, p.length);
         cars.push_back(car);
     }
+}
+
+/// Acceleration bound of a car that knows about the ego (`INFINITY` for
+/// none). A car in the way of the ego's passage through its lane, which
+/// would neither be clear before the ego enters nor arrive after it is out
+/// (with `yield_margin_s` either side), gives way if it can with at most
+/// `yield_decel`: it slows just enough to arrive after the ego, stopping
+/// short of the lane if need be. If it cannot, it drives on with the right
+/// of way, until the ego is actually in its lane: then it brakes as hard as
+/// it must, up to `emergency_decel`. Once in a merge lane, the ego is
+/// followed like any leader.
+fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
+    if c.merge && c.occupying {
+        return if car.s < c.rear {
+            iidm_accel(car.v, car.v_desired, c.rear - car.s, c.v, p)
+        } else {
+            f64::INFINITY
+        };
+    }
+    // Where the car must stop if it gives way: short of the ego's path, or
+    // behind the ego's footprint for a car already past the path's start.
+    let target = if car.s < c.lane_in {
+        c.lane_in
+    } else if c.occupying && car.s < c.rear {
+        c.rear
+    } else {
+        return f64::INFINITY;
+    };
+    let room = target - car.s - HARD_GAP;
+    let after = c.t_exit + p.yield_margin_s;
+    if !car.yielding {
+        let (t_arrive, t_clear) = if car.v > 0.1 {
+            (
+                (target - car.s) / car.v,
+                (c.lane_clear + p.length - car.s) / car.v,
+            )
+        } else {
+            (f64::INFINITY, f64::INFINITY)
+        };
+        car.yielding = t_clear + p.yield_margin_s > c.t_enter && t_arrive < after;
+    }
+    if !car.yielding {
+        return f64::INFINITY;
+    }
+    if c.merge {
+        // The ego is about to be its leader, entering at `c.v`.
+        return iidm_accel(car.v, car.v_desired, target - car.s, c.v, p).max(-p.yield_decel);
+    }
+    let cap = if c.occupying {
+        p.emergency_decel
+    } else {
+        p.yield_decel
+    };
+    -give_way_decel(car.v, room, after).min(cap)
 }
 
 fn place(car: &mut Car, lane: &crate::scenario::Lane, length: f64) {
@@ -397,58 +452,14 @@ mod tests {
         assert!((mean_factor - 1.0).abs() < 0.05, "{mean_factor}");
     }
 
-    #[test]
-    fn cars_stop_behind_an_ego_in_their_lane() {
-        let s = Scenario::builtin("forward").unwrap();
-        let mut t = Traffic::new(&s);
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
-        let lane = &s.lanes()[0];
+    fn lone_car(s: &Scenario, at: f64, v: f64) -> Traffic {
+        let mut t = Traffic::new(s);
         let mut car = Car {
             id: 0,
             lane: 0,
-            s: 50.0,
-            v: 20.0,
-            v_desired: 20.0,
-            braking: false,
-            yielding: false,
-            pos: Vec2::default(),
-            axis: Vec2::default(),
-            heading: 0.0,
-        };
-        place(&mut car, lane, 5.0);
-        t.lanes[0].push_back(car);
-        // A stopped ego 100 m ahead of the car.
-        let foes = [
-            EgoFoe::Occupying {
-                rear: 150.0,
-                v: 0.0,
-            },
-            EgoFoe::None,
-        ];
-        let mut braked = false;
-        for _ in 0..200 {
-            t.step(&s, &foes, &mut rng);
-            let c = t.lanes[0].iter().find(|c| c.id == 0).unwrap();
-            braked |= c.braking;
-            assert!(c.s < 150.0, "{c:?}");
-        }
-        let c = t.lanes[0].iter().find(|c| c.id == 0).unwrap();
-        assert!(c.v < 0.05 && c.s > 140.0, "{c:?}");
-        assert!(braked && t.brake_time_s() > 0.0);
-        assert_eq!(t.guard_hits(), 0);
-    }
-
-    #[test]
-    fn cars_that_clear_in_time_do_not_yield() {
-        let s = Scenario::builtin("forward").unwrap();
-        let mut t = Traffic::new(&s);
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
-        let mut car = Car {
-            id: 0,
-            lane: 0,
-            s: 140.0,
-            v: 20.0,
-            v_desired: 20.0,
+            s: at,
+            v,
+            v_desired: v,
             braking: false,
             yielding: false,
             pos: Vec2::default(),
@@ -457,23 +468,110 @@ mod tests {
         };
         place(&mut car, &s.lanes()[0], 5.0);
         t.lanes[0].push_back(car);
-        // Needs (155 + 5 - 140) / 20 = 1 s to clear; the ego comes in 3 s.
-        let late = [EgoFoe::Entering {
+        t
+    }
+
+    /// The ego crossing lane 0 of `forward` between lane coordinates 150
+    /// and 155, entering in `t_enter` and out in `t_exit` seconds.
+    fn crossing(t_enter: f64, t_exit: f64, occupying: bool) -> [EgoFoe; 1] {
+        [EgoFoe::Conflict(EgoConflict {
             lane_in: 150.0,
             lane_clear: 155.0,
-            t_enter: 3.0,
-        }];
-        t.step(&s, &late, &mut rng);
-        assert!(!t.lanes[0][0].braking);
-        // Nearer, it needs 2 s to clear and the ego comes in 1.5 s: it brakes.
-        t.lanes[0][0].s = 120.0;
-        t.lanes[0][0].v = 20.0;
-        let soon = [EgoFoe::Entering {
-            lane_in: 150.0,
-            lane_clear: 155.0,
-            t_enter: 1.5,
-        }];
-        t.step(&s, &soon, &mut rng);
-        assert!(t.lanes[0][0].braking);
+            t_enter,
+            t_exit,
+            occupying,
+            rear: 150.0,
+            v: 0.0,
+            merge: false,
+        })]
+    }
+
+    #[test]
+    fn cars_follow_an_ego_that_merged_into_their_lane() {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut t = lone_car(&s, 50.0, 20.0);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        // A stopped ego in the lane 100 m ahead of the car.
+        let foes = [EgoFoe::Conflict(EgoConflict {
+            lane_in: 140.0,
+            lane_clear: 160.0,
+            t_enter: 0.0,
+            t_exit: 0.0,
+            occupying: true,
+            rear: 150.0,
+            v: 0.0,
+            merge: true,
+        })];
+        let mut braked = false;
+        for _ in 0..200 {
+            t.step(&s, &foes, &mut rng);
+            let c = t.lanes[0][0];
+            braked |= c.braking;
+            assert!(c.s < 150.0, "{c:?}");
+        }
+        let c = t.lanes[0][0];
+        assert!(c.v < 0.05 && c.s > 140.0, "{c:?}");
+        assert!(braked && t.brake_time_s() > 0.0);
+        assert_eq!(t.guard_hits(), 0);
+    }
+
+    #[test]
+    fn only_cars_in_the_way_of_the_ego_react() {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let decel = |t: &mut Traffic, foes: &[EgoFoe], rng: &mut Xoshiro256PlusPlus| {
+            let v = t.lanes[0][0].v;
+            let mut calm = s.spec().clone();
+            calm.traffic.sigma = 0.0;
+            let calm = Scenario::compile(calm).unwrap();
+            t.step(&calm, foes, rng);
+            (v - t.lanes[0][0].v) / 0.2
+        };
+        // Clear of the crossing ((155 + 5 - 140) / 20 = 1 s) well before the
+        // ego enters in 3 s: drives on.
+        let mut t = lone_car(&s, 140.0, 20.0);
+        assert!(decel(&mut t, &crossing(3.0, 4.0, false), &mut rng) < 1e-9);
+        assert!(!t.lanes[0][0].yielding);
+        // 100 m away, arriving in 5 s, after the ego is out (4 s) with
+        // 0.5 s to spare: drives on.
+        let mut t = lone_car(&s, 50.0, 20.0);
+        assert!(decel(&mut t, &crossing(1.0, 4.0, false), &mut rng) < 1e-9);
+        // 60 m away, arriving in 3 s, while the ego is in the lane: slows
+        // just enough to arrive 0.5 s after the ego is out, at 4.5 s:
+        // 2 (20 x 4.5 - 59.5) / 4.5^2 = 3.0 m/s².
+        let mut t = lone_car(&s, 90.0, 20.0);
+        let d = decel(&mut t, &crossing(1.0, 4.0, false), &mut rng);
+        assert!((d - 3.012).abs() < 0.01 && t.lanes[0][0].braking, "{d}");
+        // 30 m away: it would need 400 / 59 = 6.8 m/s² to stop short of the
+        // crossing, but brakes only as hard as is comfortable (4.5) while the
+        // ego is still outside its lane...
+        let mut t = lone_car(&s, 120.0, 20.0);
+        let d = decel(&mut t, &crossing(1.0, 4.0, false), &mut rng);
+        assert!((d - 4.5).abs() < 1e-9, "{d}");
+        // ...and as hard as it must once the ego is in it: 19.1 m/s with
+        // 25.68 m to go, 7.1 m/s².
+        let d = decel(&mut t, &crossing(0.0, 3.0, true), &mut rng);
+        assert!((d - 19.1 * 19.1 / (2.0 * 25.68)).abs() < 1e-6, "{d}");
+        assert!(t.lanes[0][0].yielding);
+        // Up to 9 m/s² at most: 15 m away it would need 13.8.
+        let mut t = lone_car(&s, 135.0, 20.0);
+        let d = decel(&mut t, &crossing(0.0, 3.0, true), &mut rng);
+        assert!((d - 9.0).abs() < 1e-9, "{d}");
+        // Gone: it forgets the ego.
+        decel(&mut t, &[EgoFoe::None], &mut rng);
+        assert!(!t.lanes[0][0].yielding);
+    }
+
+    #[test]
+    fn give_way_decel_values() {
+        // Enough time to stop: the stopping deceleration, 400 / 80.
+        assert!((give_way_decel(20.0, 40.0, f64::INFINITY) - 5.0).abs() < 1e-12);
+        assert!((give_way_decel(20.0, 40.0, 10.0) - 5.0).abs() < 1e-12);
+        // 100 m to cover in at least 6 s: 2 (120 - 100) / 36.
+        assert!((give_way_decel(20.0, 100.0, 6.0) - 40.0 / 36.0).abs() < 1e-12);
+        // Already late enough: it may even speed up.
+        assert!(give_way_decel(10.0, 100.0, 5.0) < 0.0);
+        assert_eq!(give_way_decel(5.0, 0.0, 1.0), f64::INFINITY);
+        assert_eq!(give_way_decel(0.0, 0.0, 1.0), 0.0);
     }
 }
