@@ -282,20 +282,7 @@ impl Traffic {
                 "cars must be placed downstream first, without overlap",
             ));
         }
-        let mut car = Car {
-            id: self.next_id,
-            lane,
-            s,
-            v,
-            v_desired: v.max(0.1),
-            braking: false,
-            yielding: false,
-            pos: Vec2::default(),
-            axis: Vec2::default(),
-            heading: 0.0,
-        };
-        self.next_id = self.next_id.wrapping_add(1);
-        place(&mut car, l, length);
+        let car = new_car(&mut self.next_id, l, lane, s, v, v.max(0.1), length);
         self.lanes[lane].push_back(car);
         Ok(())
     }
@@ -335,20 +322,7 @@ impl Traffic {
         self.pending[li] -= 1;
         self.next_factor[li] = None;
         self.insertions += 1;
-        let mut car = Car {
-            id: self.next_id,
-            lane: li,
-            s: 0.0,
-            v,
-            v_desired,
-            braking: false,
-            yielding: false,
-            pos: Vec2::default(),
-            axis: Vec2::default(),
-            heading: 0.0,
-        };
-        self.next_id = self.next_id.wrapping_add(1);
-        place(&mut car, lane, p.length);
+        let car = new_car(&mut self.next_id, lane, li, 0.0, v, v_desired, p.length);
         cars.push_back(car);
     }
 }
@@ -405,6 +379,33 @@ fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
         p.yield_decel
     };
     -give_way_decel(car.v, room, after).min(cap)
+}
+
+/// A car taking the next id at `s` on lane `li`, posed on the lane.
+fn new_car(
+    next_id: &mut u32,
+    lane: &crate::scenario::Lane,
+    li: usize,
+    s: f64,
+    v: f64,
+    v_desired: f64,
+    length: f64,
+) -> Car {
+    let mut car = Car {
+        id: *next_id,
+        lane: li,
+        s,
+        v,
+        v_desired,
+        braking: false,
+        yielding: false,
+        pos: Vec2::default(),
+        axis: Vec2::default(),
+        heading: 0.0,
+    };
+    *next_id = next_id.wrapping_add(1);
+    place(&mut car, lane, length);
+    car
 }
 
 fn place(car: &mut Car, lane: &crate::scenario::Lane, length: f64) {
