@@ -61,6 +61,14 @@ pub enum Command {
     /// Sweep TTC thresholds on a scenario and find the lowest one with zero
     /// collisions (the paper's tuning rule); CSV and PNG with --out.
     TuneTtc(TuneTtcArgs),
+    /// Draw one episode of a policy on a scenario: an animated GIF of the
+    /// whole episode, or a PNG/SVG of one moment.
+    ///
+    /// Roads, obstacles (gray), cars the ego sees (green), cars hidden from
+    /// it (yellow), braking cars (red outline), the ego (blue), and with
+    /// --grid the observation grid (occupied cells blue, occluded cells
+    /// dark).
+    Render(RenderArgs),
     /// Run the prioritized replay server.
     ///
     /// Actors insert batches over gRPC (any host) or iceoryx2 shared memory
@@ -123,6 +131,45 @@ pub struct TuneTtcArgs {
     /// Folder for tune-ttc[-creep]-<scenario>.csv and .png.
     #[arg(long)]
     pub out: Option<PathBuf>,
+}
+
+/// `crossroads render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Policy: ttc:<seconds>, ttc-creep:<seconds> or random.
+    #[arg(long, short = 'p')]
+    pub policy: String,
+    /// Scenario name or scenario TOML file.
+    #[arg(long, default_value = "left")]
+    pub scenario: String,
+    /// Action set the policy drives.
+    #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
+    pub actions: ActionSet,
+    /// Base seed; with --trial, the episode is trial I of
+    /// `crossroads eval --seed S`.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Which trial of the seed's sequence to draw.
+    #[arg(long, default_value_t = 0)]
+    pub trial: u64,
+    /// Output file: .gif (the whole episode, one frame per 0.2 s step),
+    /// .png or .svg (one moment, see --step).
+    #[arg(long, short = 'o', value_name = "FILE")]
+    pub out: PathBuf,
+    /// Overlay the observation grid the action set's network sees.
+    #[arg(long)]
+    pub grid: bool,
+    /// For .png/.svg: the simulation step to draw [default: the step at
+    /// which the policy decides to go, else the last].
+    #[arg(long)]
+    pub step: Option<u32>,
+    /// Pixels per metre [default: 8, or 5 for the wide view that grids and
+    /// occlusion scenarios need].
+    #[arg(long)]
+    pub scale: Option<f64>,
+    /// For .gif: playback speed relative to real time.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
 }
 
 fn parse_action_set(s: &str) -> Result<ActionSet, String> {

@@ -34,6 +34,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Doctor(args) => commands::doctor::run(&config, &args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::TuneTtc(args) => commands::tune_ttc::run(&args),
+        Command::Render(args) => commands::render::run(&args),
         Command::Replay(_) => commands::replay::run(&config),
         Command::Bench(args) => commands::bench::run(&args),
     }

@@ -9,9 +9,9 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 
 /// Font family name under which DejaVu Sans is registered.
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The embedded font is valid; a failure would only drop text.

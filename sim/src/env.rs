@@ -185,6 +185,18 @@ impl Env {
     /// Applies one action: one transition, possibly several simulation
     /// steps. Stepping a finished episode is a no-op with `done` set.
     pub fn step(&mut self, action: usize) -> Result<StepResult, SimError> {
+        self.step_with(action, |_| {})
+    }
+
+    /// [`Env::step`], calling `each` after every simulation step of the
+    /// transition (for drawing every 0.2 s of a long *go*). The occlusion
+    /// grid is refreshed once per transition, so inside one use
+    /// [`Env::is_visible`] rather than the observation.
+    pub fn step_with(
+        &mut self,
+        action: usize,
+        mut each: impl FnMut(&Self),
+    ) -> Result<StepResult, SimError> {
         let control = self.config.action_set.decode(action)?;
         let gamma = self.config.gamma;
         let mut result = StepResult {
@@ -207,6 +219,7 @@ impl Env {
             result.reward += discount * r;
             discount *= gamma;
             result.steps += 1;
+            each(self);
             if self.outcome.is_some() {
                 break;
             }

@@ -16,7 +16,8 @@
 //! [`TtcPolicy`] (with or without creeping) and [`RandomPolicy`].
 //! [`evaluate`] runs seeded trials in parallel (same result on any number of
 //! threads) into an [`EvalReport`]; [`tune_ttc`] sweeps TTC thresholds;
-//! [`bench_scenario`] measures throughput; [`render_svg`] draws a state.
+//! [`bench_scenario`] measures throughput; a [`Scene`] describes a picture
+//! of a state (for `crossroads render`).
 //!
 //! # Frame and units
 //!
@@ -199,7 +200,7 @@ pub use occlusion::{ObstacleSpec, OcclusionLayout, OcclusionSpec, Side, line_of_
 pub use params::{EgoParams, Rewards, TrafficParams};
 pub use path::{Path, PathSpec, PieceSpec};
 pub use policy::{Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy};
-pub use render::{RenderView, render_svg};
+pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};
 pub use traffic::{Car, EgoConflict, EgoFoe, Traffic, give_way_decel};

@@ -109,7 +109,7 @@ impl ObsKind {
 }
 
 /// A grid's frame: cell of a world point, and world centre of a cell.
-#[derive(Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 struct Frame {
     origin: Vec2,
     /// Unit vector along which `u` grows (column axis for TTG, forward for
@@ -169,6 +169,62 @@ impl Frame {
             ),
         };
         self.origin + self.u * a + self.v * b
+    }
+}
+
+/// The world geometry of an environment's observation grid, for drawing
+/// it: which cell holds a point, and each cell's centre and corners. The
+/// Sequential grid moves with the ego, so take a fresh one per state.
+#[derive(Debug, Clone, Copy)]
+pub struct GridGeometry {
+    frame: Frame,
+    spec: ObsSpec,
+}
+
+impl GridGeometry {
+    /// The grid of kind `kind` for `env`'s current state.
+    pub fn of(env: &Env, kind: ObsKind) -> Self {
+        Self {
+            frame: Frame::of(env, kind),
+            spec: kind.spec(false),
+        }
+    }
+
+    /// Rows and columns.
+    pub fn shape(&self) -> (usize, usize) {
+        (self.spec.rows, self.spec.cols)
+    }
+
+    /// `(row, col)` of the cell holding `p`, if `p` is on the grid.
+    pub fn cell(&self, p: Vec2) -> Option<(usize, usize)> {
+        self.frame.cell(p).map(|(r, c, _, _)| (r, c))
+    }
+
+    /// World centre of a cell.
+    pub fn center(&self, row: usize, col: usize) -> Vec2 {
+        self.frame.center(row, col)
+    }
+
+    /// World corners of a cell, in order around it.
+    pub fn corners(&self, row: usize, col: usize) -> [Vec2; 4] {
+        let c = self.frame.center(row, col);
+        // Half a cell along the rows' axis and along the columns' axis.
+        let (rows_axis, cols_axis) = match self.frame.kind {
+            ObsKind::Ttg => (
+                self.frame.v * (-0.5 * TTG_CELL_Y),
+                self.frame.u * (0.5 * TTG_CELL_X),
+            ),
+            ObsKind::Sequential => (
+                self.frame.u * (0.5 * SEQ_CELL_FWD),
+                self.frame.v * (-SEQ_HALF_LAT / SEQ_COLS as f64),
+            ),
+        };
+        [
+            c - rows_axis - cols_axis,
+            c - rows_axis + cols_axis,
+            c + rows_axis + cols_axis,
+            c + rows_axis - cols_axis,
+        ]
     }
 }
 

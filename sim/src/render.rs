@@ -1,10 +1,13 @@
-//! Rendering of an episode's current state as an SVG picture, for people
-//! and for `crossroads render`. No dependencies: SVG is text.
-
-use std::fmt::Write;
+//! What a picture of an episode's state shows, as plain data: a [`Scene`]
+//! of coloured polygons and lines in pixel coordinates plus a caption.
+//! Drawing it (PNG, animated GIF, SVG) is the caller's business; the
+//! `crossroads render` command draws scenes with plotters. Keeping the sim
+//! free of drawing libraries keeps it small and lets tests check a scene's
+//! content directly.
 
 use crate::env::Env;
 use crate::geometry::{OrientedRect, Vec2};
+use crate::observation::{GridGeometry, ObsKind};
 
 /// What part of the world to draw, and how large.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,93 +37,318 @@ impl Default for RenderView {
     }
 }
 
-/// The environment's current state as an SVG document: lanes (grey), the
-/// ego's path (dashed) and stop line, occluders (dark grey), traffic (green
-/// when the ego sees it, yellow when hidden, outlined red while braking),
-/// the ego (blue), and the step and outcome.
-pub fn render_svg(env: &Env, view: &RenderView) -> String {
-    let w = (view.x_max - view.x_min) * view.scale;
-    let h = (view.y_max - view.y_min) * view.scale;
-    let px = |p: Vec2| {
+impl RenderView {
+    /// A view wide enough for the whole TTG grid (x from -104 to 104 m)
+    /// and for the occluders of the paper's family, at 5 px/m.
+    pub fn wide() -> Self {
+        Self {
+            x_min: -110.0,
+            x_max: 110.0,
+            y_min: -30.0,
+            y_max: 25.0,
+            scale: 5.0,
+        }
+    }
+
+    /// Picture size in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        let w = ((self.x_max - self.x_min) * self.scale).round().max(1.0);
+        let h = ((self.y_max - self.y_min) * self.scale).round().max(1.0);
+        (w as u32, h as u32)
+    }
+
+    /// Pixel position of a world point (y grows downwards in pixels).
+    pub fn px(&self, p: Vec2) -> (f64, f64) {
         (
-            (p.x - view.x_min) * view.scale,
-            (view.y_max - p.y) * view.scale,
+            (p.x - self.x_min) * self.scale,
+            (self.y_max - p.y) * self.scale,
         )
-    };
-    let mut out = String::with_capacity(16 * 1024);
-    // Writing to a String cannot fail.
-    let _ = writeln!(
-        out,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w:.0}" height="{h:.0}" viewBox="0 0 {w:.0} {h:.0}">"#
-    );
-    let _ = writeln!(
-        out,
-        r##"<rect width="100%" height="100%" fill="#e8efe0"/>"##
-    );
-    let sc = env.scenario();
-    let lane_px = 3.5 * view.scale;
-    for lane in sc.lanes() {
-        let pts = polyline(&lane.path, 0.0, lane.path.length(), &px);
-        let _ = writeln!(
-            out,
-            r##"<polyline points="{pts}" fill="none" stroke="#9a9a9a" stroke-width="{lane_px:.1}"/>"##
-        );
     }
-    let ego_spec = &sc.spec().ego;
-    let half = 0.5 * ego_spec.params.length;
-    let ego_path = polyline(sc.ego_path(), 0.0, sc.ego_path().length(), &px);
-    let _ = writeln!(
-        out,
-        r##"<polyline points="{ego_path}" fill="none" stroke="#9a9a9a" stroke-width="{lane_px:.1}"/>"##
-    );
-    let route = polyline(
-        sc.ego_path(),
-        ego_spec.stop_line_s - half,
-        ego_spec.goal_s - half,
-        &px,
-    );
-    let _ = writeln!(
-        out,
-        r##"<polyline points="{route}" fill="none" stroke="#3060c0" stroke-width="1.5" stroke-dasharray="6 4"/>"##
-    );
-    let stop = sc.ego_path().pose_at(ego_spec.stop_line_s - half);
-    let across = Vec2::from_angle(stop.heading).perp() * 1.75;
-    let front = stop.pos + Vec2::from_angle(stop.heading) * half;
-    let (a, b) = (px(front + across), px(front - across));
-    let _ = writeln!(
-        out,
-        r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="white" stroke-width="3"/>"##,
-        a.0, a.1, b.0, b.1
-    );
-    for o in env.occluders() {
-        rect(&mut out, o, "#505050", "none", &px);
+}
+
+/// An RGB colour with opacity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Color {
+    /// Red.
+    pub r: u8,
+    /// Green.
+    pub g: u8,
+    /// Blue.
+    pub b: u8,
+    /// Opacity, 0 (transparent) to 1.
+    pub alpha: f64,
+}
+
+impl Color {
+    const fn rgb(r: u8, g: u8, b: u8) -> Self {
+        Self {
+            r,
+            g,
+            b,
+            alpha: 1.0,
+        }
     }
-    let tp = &sc.spec().traffic;
-    for car in env.traffic().cars() {
-        let fill = if env.is_visible(car.pos) {
-            "#30a040"
-        } else {
-            "#e0c020"
+
+    const fn with_alpha(self, alpha: f64) -> Self {
+        Self { alpha, ..self }
+    }
+}
+
+/// The palette, so that legends and tests can name the colours.
+pub mod palette {
+    use super::Color;
+
+    /// Background (grass).
+    pub const BACKGROUND: Color = Color::rgb(0xe8, 0xef, 0xe0);
+    /// Road surface.
+    pub const ROAD: Color = Color::rgb(0x9a, 0x9a, 0x9a);
+    /// Obstacles that block the view.
+    pub const OBSTACLE: Color = Color::rgb(0x50, 0x50, 0x50);
+    /// Cars the ego's sensor sees.
+    pub const VISIBLE_CAR: Color = Color::rgb(0x30, 0xa0, 0x40);
+    /// Cars hidden from the ego's sensor.
+    pub const OCCLUDED_CAR: Color = Color::rgb(0xe0, 0xc0, 0x20);
+    /// Outline of a car that is braking.
+    pub const BRAKING: Color = Color::rgb(0xd0, 0x20, 0x20);
+    /// The ego.
+    pub const EGO: Color = Color::rgb(0x20, 0x50, 0xd0);
+    /// The ego's route from the stop line to the goal, and the stop line.
+    pub const ROUTE: Color = Color::rgb(0x30, 0x60, 0xc0);
+    /// Stop line.
+    pub const STOP_LINE: Color = Color::rgb(0xff, 0xff, 0xff);
+    /// Grid lines of the observation overlay.
+    pub const GRID: Color = Color::rgb(0x20, 0x20, 0x60).with_alpha(0.35);
+    /// Overlay cells the observation marks occupied.
+    pub const GRID_OCCUPIED: Color = Color::rgb(0x30, 0x60, 0xe0).with_alpha(0.35);
+    /// Overlay cells the sensor cannot see.
+    pub const GRID_OCCLUDED: Color = Color::rgb(0x20, 0x20, 0x20).with_alpha(0.25);
+    /// Caption text.
+    pub const TEXT: Color = Color::rgb(0x10, 0x10, 0x10);
+}
+
+/// What a [`Shape`] is, so that tests and legends can count by meaning.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layer {
+    /// Lanes and the ego's road.
+    Road,
+    /// Stop line and route.
+    Marking,
+    /// Observation grid overlay.
+    Grid,
+    /// Occluders.
+    Obstacle,
+    /// A traffic car the sensor sees.
+    VisibleCar,
+    /// A traffic car hidden from the sensor.
+    OccludedCar,
+    /// The ego.
+    Ego,
+}
+
+/// One thing to draw, in pixel coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
+    /// A closed polygon, filled and optionally outlined.
+    Polygon {
+        /// What it shows.
+        layer: Layer,
+        /// Corners in pixels.
+        points: Vec<(f64, f64)>,
+        /// Fill colour.
+        fill: Color,
+        /// Outline colour and width in pixels.
+        stroke: Option<(Color, f64)>,
+    },
+    /// An open polyline.
+    Line {
+        /// What it shows.
+        layer: Layer,
+        /// Points in pixels.
+        points: Vec<(f64, f64)>,
+        /// Colour.
+        color: Color,
+        /// Width in pixels.
+        width: f64,
+        /// Dashed rather than solid.
+        dashed: bool,
+    },
+}
+
+impl Shape {
+    /// What the shape shows.
+    pub fn layer(&self) -> Layer {
+        match self {
+            Self::Polygon { layer, .. } | Self::Line { layer, .. } => *layer,
+        }
+    }
+}
+
+/// Options of [`Scene::of`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SceneOptions {
+    /// Overlay this observation grid: cell lines, cells the observation
+    /// marks occupied, and (in occlusion scenarios) cells the sensor cannot
+    /// see.
+    pub grid: Option<ObsKind>,
+}
+
+/// A picture of one state: shapes in drawing order (background first) and
+/// a one-line caption.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// Size in pixels.
+    pub size: (u32, u32),
+    /// Background colour.
+    pub background: Color,
+    /// Shapes, back to front.
+    pub shapes: Vec<Shape>,
+    /// Scenario, step, time, ego speed and outcome.
+    pub caption: String,
+}
+
+impl Scene {
+    /// The scene of `env`'s current state: lanes, the ego's route and stop
+    /// line, occluders (gray), traffic (green when the ego's sensor sees
+    /// it, yellow when hidden, outlined red while braking), the ego (blue),
+    /// and optionally the observation grid.
+    pub fn of(env: &Env, view: &RenderView, options: &SceneOptions) -> Self {
+        let mut shapes = Vec::with_capacity(64);
+        let px = |p: Vec2| view.px(p);
+        let sc = env.scenario();
+        let lane_px = 3.5 * view.scale;
+        for lane in sc.lanes() {
+            shapes.push(Shape::Line {
+                layer: Layer::Road,
+                points: polyline(&lane.path, 0.0, lane.path.length(), &px),
+                color: palette::ROAD,
+                width: lane_px,
+                dashed: false,
+            });
+        }
+        let ego_spec = &sc.spec().ego;
+        let half = 0.5 * ego_spec.params.length;
+        shapes.push(Shape::Line {
+            layer: Layer::Road,
+            points: polyline(sc.ego_path(), 0.0, sc.ego_path().length(), &px),
+            color: palette::ROAD,
+            width: lane_px,
+            dashed: false,
+        });
+        shapes.push(Shape::Line {
+            layer: Layer::Marking,
+            points: polyline(
+                sc.ego_path(),
+                ego_spec.stop_line_s - half,
+                ego_spec.goal_s - half,
+                &px,
+            ),
+            color: palette::ROUTE,
+            width: 1.5,
+            dashed: true,
+        });
+        let stop = sc.ego_path().pose_at(ego_spec.stop_line_s - half);
+        let along = Vec2::from_angle(stop.heading);
+        let front = stop.pos + along * half;
+        let across = along.perp() * 1.75;
+        shapes.push(Shape::Line {
+            layer: Layer::Marking,
+            points: vec![px(front + across), px(front - across)],
+            color: palette::STOP_LINE,
+            width: 3.0,
+            dashed: false,
+        });
+        if let Some(kind) = options.grid {
+            grid_overlay(env, kind, &px, &mut shapes);
+        }
+        for o in env.occluders() {
+            shapes.push(rect(Layer::Obstacle, o, palette::OBSTACLE, None, &px));
+        }
+        let tp = &sc.spec().traffic;
+        for car in env.traffic().cars() {
+            let (layer, fill) = if env.is_visible(car.pos) {
+                (Layer::VisibleCar, palette::VISIBLE_CAR)
+            } else {
+                (Layer::OccludedCar, palette::OCCLUDED_CAR)
+            };
+            let stroke = car.braking.then_some((palette::BRAKING, 2.0));
+            shapes.push(rect(
+                layer,
+                &car.rect(tp.length, tp.width),
+                fill,
+                stroke,
+                &px,
+            ));
+        }
+        shapes.push(rect(
+            Layer::Ego,
+            &env.ego_footprint(),
+            palette::EGO,
+            None,
+            &px,
+        ));
+        let status = match env.outcome() {
+            Some(o) => format!("{o:?}").to_lowercase(),
+            None => String::from("running"),
         };
-        let stroke = if car.braking { "#d02020" } else { "none" };
-        rect(&mut out, &car.rect(tp.length, tp.width), fill, stroke, &px);
+        let caption = format!(
+            "{}  step {}  t = {:.1} s  ego {:.1} m/s  {}",
+            sc.name(),
+            env.steps(),
+            env.metrics().time_s,
+            env.ego().v,
+            status
+        );
+        Self {
+            size: view.size(),
+            background: palette::BACKGROUND,
+            shapes,
+            caption,
+        }
     }
-    rect(&mut out, &env.ego_footprint(), "#2050d0", "none", &px);
-    let status = match env.outcome() {
-        Some(o) => format!("{o:?}"),
-        None => String::from("running"),
-    };
-    let _ = writeln!(
-        out,
-        r#"<text x="8" y="20" font-family="monospace" font-size="14">{} step {} t={:.1}s ego v={:.1} m/s {}</text>"#,
-        sc.name(),
-        env.steps(),
-        env.metrics().time_s,
-        env.ego().v,
-        status
-    );
-    out.push_str("</svg>\n");
-    out
+
+    /// Number of shapes on `layer`.
+    pub fn count(&self, layer: Layer) -> usize {
+        self.shapes.iter().filter(|s| s.layer() == layer).count()
+    }
+}
+
+/// Grid lines of every cell, blue cells where a visible car's centre lies
+/// (what the observation's occupancy channel holds), and dark cells the
+/// sensor cannot see (when the scenario has occluders).
+fn grid_overlay(
+    env: &Env,
+    kind: ObsKind,
+    px: &impl Fn(Vec2) -> (f64, f64),
+    shapes: &mut Vec<Shape>,
+) {
+    let grid = GridGeometry::of(env, kind);
+    let (rows, cols) = grid.shape();
+    let occlusion = !env.occluders().is_empty();
+    let mut occupied = vec![false; rows * cols];
+    for car in env.traffic().cars() {
+        if let Some((r, c)) = grid.cell(car.pos) {
+            if !occlusion || env.is_visible(grid.center(r, c)) {
+                occupied[r * cols + c] = true;
+            }
+        }
+    }
+    for r in 0..rows {
+        for c in 0..cols {
+            let fill = if occupied[r * cols + c] {
+                palette::GRID_OCCUPIED
+            } else if occlusion && !env.is_visible(grid.center(r, c)) {
+                palette::GRID_OCCLUDED
+            } else {
+                palette::GRID.with_alpha(0.0)
+            };
+            shapes.push(Shape::Polygon {
+                layer: Layer::Grid,
+                points: grid.corners(r, c).into_iter().map(px).collect(),
+                fill,
+                stroke: Some((palette::GRID, 1.0)),
+            });
+        }
+    }
 }
 
 fn polyline(
@@ -128,30 +356,24 @@ fn polyline(
     from: f64,
     to: f64,
     px: &impl Fn(Vec2) -> (f64, f64),
-) -> String {
+) -> Vec<(f64, f64)> {
     let n = ((to - from) / 1.0).ceil().max(1.0) as usize;
-    let mut s = String::new();
-    for i in 0..=n {
-        let (x, y) = px(path.pose_at(from + (to - from) * i as f64 / n as f64).pos);
-        let _ = write!(s, "{x:.1},{y:.1} ");
-    }
-    s
+    (0..=n)
+        .map(|i| px(path.pose_at(from + (to - from) * i as f64 / n as f64).pos))
+        .collect()
 }
 
 fn rect(
-    out: &mut String,
+    layer: Layer,
     r: &OrientedRect,
-    fill: &str,
-    stroke: &str,
+    fill: Color,
+    stroke: Option<(Color, f64)>,
     px: &impl Fn(Vec2) -> (f64, f64),
-) {
-    let mut pts = String::new();
-    for c in r.corners() {
-        let (x, y) = px(c);
-        let _ = write!(pts, "{x:.1},{y:.1} ");
+) -> Shape {
+    Shape::Polygon {
+        layer,
+        points: r.corners().into_iter().map(px).collect(),
+        fill,
+        stroke,
     }
-    let _ = writeln!(
-        out,
-        r#"<polygon points="{pts}" fill="{fill}" stroke="{stroke}" stroke-width="2"/>"#
-    );
 }

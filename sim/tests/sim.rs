@@ -609,16 +609,68 @@ fn bench_reports_throughput() {
 }
 
 #[test]
-fn renders_svg() {
-    let mut e = env("occluded", ActionSet::Creep);
+fn scene_colours_cars_by_visibility_and_overlays_the_grid() {
+    let mut e = env("left", ActionSet::Ttg);
     e.reset(4);
-    e.step(1).unwrap();
-    let svg = render_svg(&e, &RenderView::default());
-    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
-    // One polygon per car, per occluder, and the ego.
-    let polygons = svg.matches("<polygon").count();
-    assert_eq!(polygons, e.traffic().len() + e.occluders().len() + 1);
-    assert!(svg.contains("occluded step 1"));
+    e.clear_traffic();
+    // Eastbound car at x = -50 (hidden behind a wall at x = -20 between it
+    // and the sensor at the stop line), westbound car at x = 50 (in view).
+    e.place_car(0, 100.0, 15.0).unwrap();
+    e.place_car(1, 100.0, 15.0).unwrap();
+    e.set_occluders(&[OrientedRect::new(Vec2::new(-20.0, -3.2), 0.0, 10.0, 0.5)]);
+    let hidden = e.traffic().cars().find(|c| c.pos.x < 0.0).unwrap();
+    assert!(!e.is_visible(hidden.pos), "{:?}", hidden.pos);
+
+    let plain = Scene::of(&e, &RenderView::wide(), &SceneOptions::default());
+    assert_eq!(plain.count(Layer::VisibleCar), 1);
+    assert_eq!(plain.count(Layer::OccludedCar), 1);
+    assert_eq!(plain.count(Layer::Obstacle), 1);
+    assert_eq!(plain.count(Layer::Ego), 1);
+    assert_eq!(plain.count(Layer::Grid), 0);
+    assert_eq!(plain.size, (1100, 275));
+    assert!(
+        plain.caption.starts_with("left  step 0"),
+        "{}",
+        plain.caption
+    );
+
+    let options = SceneOptions {
+        grid: Some(ObsKind::Ttg),
+    };
+    let gridded = Scene::of(&e, &RenderView::wide(), &options);
+    assert_eq!(gridded.count(Layer::Grid), TTG_ROWS * TTG_COLS);
+    let fills = |c: Color| {
+        gridded
+            .shapes
+            .iter()
+            .filter(|s| matches!(s, Shape::Polygon { layer: Layer::Grid, fill, .. } if *fill == c))
+            .count()
+    };
+    // Only the visible car's cell is occupied; the wall hides a wedge.
+    assert_eq!(fills(palette::GRID_OCCUPIED), 1);
+    assert!(fills(palette::GRID_OCCLUDED) > 0);
+    // Grid cells are 8 m x 2 m: 40 x 10 px at 5 px/m.
+    let Some(Shape::Polygon { points, .. }) =
+        gridded.shapes.iter().find(|s| s.layer() == Layer::Grid)
+    else {
+        panic!("no grid cell")
+    };
+    let xs: Vec<f64> = points.iter().map(|p| p.0).collect();
+    let ys: Vec<f64> = points.iter().map(|p| p.1).collect();
+    let span = |v: &[f64]| {
+        v.iter().cloned().fold(f64::MIN, f64::max) - v.iter().cloned().fold(f64::MAX, f64::min)
+    };
+    assert!((span(&xs) - 40.0).abs() < 1e-9 && (span(&ys) - 10.0).abs() < 1e-9);
+}
+
+#[test]
+fn step_with_sees_every_simulation_step() {
+    let mut e = env("left", ActionSet::Ttg);
+    e.reset(11);
+    let mut seen = Vec::new();
+    let r = e.step_with(0, |env| seen.push(env.steps())).unwrap();
+    assert_eq!(seen.len() as u32, r.steps);
+    assert_eq!(seen, (1..=r.steps).collect::<Vec<_>>());
 }
 
 #[test]

@@ -4,5 +4,6 @@ pub mod bench;
 pub mod config;
 pub mod doctor;
 pub mod eval;
+pub mod render;
 pub mod replay;
 pub mod tune_ttc;

@@ -128,3 +128,181 @@ fn bench_sim_prints_measured_figures() {
         assert!(f["steps_per_s"].as_f64().is_some_and(|d| d > 0.0), "{f}");
     }
 }
+
+/// Width and height from a PNG's IHDR chunk.
+fn png_size(bytes: &[u8]) -> (u32, u32) {
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "not a PNG");
+    let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+    (be(16), be(20))
+}
+
+#[test]
+fn render_gif_animates_the_same_episode_eval_plays() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let gif = dir.path().join("nested/left.gif");
+    let gif_arg = gif.to_str().expect("utf-8 path");
+    let (ok, stdout, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "ttc:3",
+        "--scenario",
+        "left",
+        "--seed",
+        "5",
+        "--grid",
+        "--speed",
+        "4",
+        "--out",
+        gif_arg,
+    ]);
+    assert!(ok, "{stderr}");
+    // Trial 0 of seed 5 is what eval plays as its first trial.
+    let (ok, eval, stderr) = crossroads(&[
+        "eval",
+        "--policy",
+        "ttc:3",
+        "--scenario",
+        "left",
+        "--seed",
+        "5",
+        "--trials",
+        "1",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let eval: serde_json::Value = serde_json::from_str(&eval).expect("json");
+    assert!(stdout.contains("success after"), "{stdout}");
+
+    let mut decoder = gif::DecodeOptions::new()
+        .read_info(std::fs::File::open(&gif).expect("gif written"))
+        .expect("a GIF");
+    // The wide view (220 m x 55 m at 5 px/m) that the grid needs.
+    assert_eq!((decoder.width(), decoder.height()), (1100, 275));
+    let mut frames = 0;
+    let mut delays = Vec::new();
+    while let Some(frame) = decoder.read_next_frame().expect("frame") {
+        frames += 1;
+        delays.push(frame.delay);
+    }
+    // One frame before the first step and one per 0.2 s step.
+    let printed: usize = stdout
+        .split('(')
+        .nth(2)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("frame count in {stdout}"));
+    assert_eq!(frames, printed);
+    let time_s: f64 = stdout
+        .split("after ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("time in {stdout}"));
+    assert_eq!(frames, (time_s / 0.2).round() as usize + 1);
+    // 0.2 s per step at 4x speed: 50 ms, in GIF's 10 ms units.
+    assert!(delays.iter().all(|&d| d == 5), "{delays:?}");
+    assert_eq!(eval["success_rate"], 1.0, "{eval}");
+    let eval_time = eval["mean_time_s"].as_f64().expect("time of the success");
+    assert!(
+        (eval_time - time_s).abs() < 0.051,
+        "{eval_time} vs {time_s}"
+    );
+}
+
+#[test]
+fn render_png_and_svg_draw_one_moment() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let png = dir.path().join("right.png");
+    let (ok, stdout, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "ttc:3",
+        "--scenario",
+        "right",
+        "--seed",
+        "1",
+        "--trial",
+        "2",
+        "--step",
+        "3",
+        "--out",
+        png.to_str().expect("utf-8"),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("(1 frame)"), "{stdout}");
+    let bytes = std::fs::read(&png).expect("png written");
+    // The default view: 120 m x 50 m at 8 px/m.
+    assert_eq!(png_size(&bytes), (960, 400));
+
+    let svg = dir.path().join("occluded.svg");
+    let (ok, _, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "ttc-creep:3",
+        "--actions",
+        "creep",
+        "--scenario",
+        "occluded-60",
+        "--grid",
+        "--out",
+        svg.to_str().expect("utf-8"),
+    ]);
+    assert!(ok, "{stderr}");
+    let text = std::fs::read_to_string(&svg).expect("svg written");
+    assert!(text.starts_with("<svg"), "{}", &text[..80.min(text.len())]);
+    assert!(text.contains("occluded"), "caption missing");
+    // 18 x 26 grid cells plus roads, cars, obstacles and the ego.
+    // Every grid cell is outlined (filled cells are polygons as well).
+    assert!(
+        text.matches("<polyline").count() >= 18 * 26,
+        "no grid overlay"
+    );
+}
+
+#[test]
+fn render_rejects_bad_requests_clearly() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bmp = dir.path().join("x.bmp");
+    let (ok, _, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "random",
+        "--out",
+        bmp.to_str().expect("utf-8"),
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("unknown picture format \"bmp\""),
+        "{stderr}"
+    );
+    let png = dir.path().join("x.png");
+    let (ok, _, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "ttc:3",
+        "--step",
+        "5000",
+        "--out",
+        png.to_str().expect("utf-8"),
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("--step 5000: the episode ended at step"),
+        "{stderr}"
+    );
+    assert!(!png.exists(), "nothing written on error");
+    let (ok, _, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "ttc-creep:3",
+        "--actions",
+        "ttg",
+        "--out",
+        png.to_str().expect("utf-8"),
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("--policy ttc-creep:3 with --actions ttg"),
+        "{stderr}"
+    );
+}
