@@ -46,8 +46,9 @@ pub struct TrafficParams {
     /// Hardest braking a driver accepts to give way to an ego that is
     /// pulling out in front of him (SUMO's comfortable `decel`); a driver
     /// who would need more drives on, keeping his right of way. Only an ego
-    /// already in his lane is braked for harder, up to `emergency_decel`.
-    /// m/s².
+    /// already in his lane, or about to merge into it ahead of him (he
+    /// cannot drive on past it), is braked for harder, up to
+    /// `emergency_decel`. m/s².
     pub yield_decel: f64,
     /// Margin, s, either side of the ego's passage through a lane: a car
     /// clear of the ego's path this long before the ego enters, or arriving
