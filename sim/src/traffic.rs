@@ -606,7 +606,7 @@ mod tests {
         // (400 - 25) / (2 x 29.5) = 6.4 m/s², more than the comfortable
         // 4.5, and it brakes at least that hard.
         let d = decel(120.0, &mut rng);
-        assert!(d >= 375.0 / 59.0 - 1e-9 && d <= 9.0, "{d}");
+        assert!((375.0 / 59.0 - 1e-9..=9.0).contains(&d), "{d}");
         // 55 m short: 3.4 m/s² would do; it brakes, no harder than 4.5.
         let d = decel(95.0, &mut rng);
         assert!(d > 0.0 && d <= 4.5 + 1e-9, "{d}");
