@@ -334,8 +334,11 @@ impl Traffic {
 /// `yield_decel`: it slows just enough to arrive after the ego, stopping
 /// short of the lane if need be. If it cannot, it drives on with the right
 /// of way, until the ego is actually in its lane: then it brakes as hard as
-/// it must, up to `emergency_decel`. Once in a merge lane, the ego is
-/// followed like any leader.
+/// it must, up to `emergency_decel`. A car giving way to an ego about to
+/// merge ahead of it follows it as a leader at its entry, with at most
+/// `yield_decel` unless slowing to the ego's speed before the entry takes
+/// more (then as much as that takes, up to `emergency_decel`). Once in a
+/// merge lane, the ego is followed like any leader.
 fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
     if c.merge && c.occupying {
         return if car.s < c.rear {
@@ -370,8 +373,21 @@ fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
         return f64::INFINITY;
     }
     if c.merge {
-        // The ego is about to be its leader, entering at `c.v`.
-        return iidm_accel(car.v, car.v_desired, target - car.s, c.v, p).max(-p.yield_decel);
+        // The ego is about to be its leader, entering at `c.v`. Driving on
+        // past it is no option, so a driver who cannot slow to its speed
+        // before its entry with comfortable braking brakes as hard as he
+        // must.
+        let follow = iidm_accel(car.v, car.v_desired, target - car.s, c.v, p);
+        let need = if car.v > c.v {
+            (car.v * car.v - c.v * c.v) / (2.0 * room.max(0.1))
+        } else {
+            0.0
+        };
+        return if need > p.yield_decel {
+            follow.max(-need.min(p.emergency_decel))
+        } else {
+            follow.max(-p.yield_decel)
+        };
     }
     let cap = if c.occupying {
         p.emergency_decel
@@ -561,6 +577,39 @@ mod tests {
         // Gone: it forgets the ego.
         decel(&mut t, &[EgoFoe::None], &mut rng);
         assert!(!t.lanes[0][0].yielding);
+    }
+
+    #[test]
+    fn cars_brake_harder_than_comfortable_only_for_a_merge_they_cannot_follow() {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut calm = s.spec().clone();
+        calm.traffic.sigma = 0.0;
+        let calm = Scenario::compile(calm).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        // The ego is about to enter lane 0 at coordinate 150, at 5 m/s.
+        let merging = [EgoFoe::Conflict(EgoConflict {
+            lane_in: 150.0,
+            lane_clear: 155.0,
+            t_enter: 0.5,
+            t_exit: 5.0,
+            occupying: false,
+            rear: 150.0,
+            v: 5.0,
+            merge: true,
+        })];
+        let decel = |at: f64, rng: &mut Xoshiro256PlusPlus| {
+            let mut t = lone_car(&s, at, 20.0);
+            t.step(&calm, &merging, rng);
+            (20.0 - t.lanes[0][0].v) / 0.2
+        };
+        // 30 m short of the entry: slowing to 5 m/s takes
+        // (400 - 25) / (2 x 29.5) = 6.4 m/s², more than the comfortable
+        // 4.5, and it brakes at least that hard.
+        let d = decel(120.0, &mut rng);
+        assert!((375.0 / 59.0 - 1e-9..=9.0).contains(&d), "{d}");
+        // 55 m short: 3.4 m/s² would do; it brakes, no harder than 4.5.
+        let d = decel(95.0, &mut rng);
+        assert!(d > 0.0 && d <= 4.5 + 1e-9, "{d}");
     }
 
     #[test]
