@@ -326,10 +326,10 @@ fn grid_overlay(
     let occlusion = !env.occluders().is_empty();
     let mut occupied = vec![false; rows * cols];
     for car in env.traffic().cars() {
-        if let Some((r, c)) = grid.cell(car.pos) {
-            if !occlusion || env.is_visible(grid.center(r, c)) {
-                occupied[r * cols + c] = true;
-            }
+        if let Some((r, c)) = grid.cell(car.pos)
+            && (!occlusion || env.is_visible(grid.center(r, c)))
+        {
+            occupied[r * cols + c] = true;
         }
     }
     for r in 0..rows {
