@@ -80,9 +80,9 @@ pub enum Command {
     Bench(BenchArgs),
 }
 
-/// `crossroads eval`.
+/// A policy driving an action set on a scenario (`eval`, `render`).
 #[derive(Debug, Args)]
-pub struct EvalArgs {
+pub struct PolicyArgs {
     /// Policy: ttc:<seconds>, ttc-creep:<seconds> or random.
     #[arg(long, short = 'p')]
     pub policy: String,
@@ -93,6 +93,13 @@ pub struct EvalArgs {
     /// Action set the policy drives.
     #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
     pub actions: ActionSet,
+}
+
+/// `crossroads eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    pub run: PolicyArgs,
     /// Number of trials.
     #[arg(long, short = 'n', default_value_t = 10_000)]
     pub trials: u64,
@@ -136,15 +143,8 @@ pub struct TuneTtcArgs {
 /// `crossroads render`.
 #[derive(Debug, Args)]
 pub struct RenderArgs {
-    /// Policy: ttc:<seconds>, ttc-creep:<seconds> or random.
-    #[arg(long, short = 'p')]
-    pub policy: String,
-    /// Scenario name or scenario TOML file.
-    #[arg(long, default_value = "left")]
-    pub scenario: String,
-    /// Action set the policy drives.
-    #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
-    pub actions: ActionSet,
+    #[command(flatten)]
+    pub run: PolicyArgs,
     /// Base seed; with --trial, the episode is trial I of
     /// `crossroads eval --seed S`.
     #[arg(long, default_value_t = 0)]

@@ -4,10 +4,10 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::Context;
-use crossroads_sim::{EvalConfig, EvalReport, Interval, Scenario, evaluate, parse_policy};
+use crossroads_sim::{EvalConfig, EvalReport, Interval, Policy, Scenario, evaluate, parse_policy};
 use serde::Serialize;
 
-use crate::cli::EvalArgs;
+use crate::cli::{EvalArgs, PolicyArgs};
 use crate::progress;
 
 /// What `--json` prints: the fields first, then the intervals.
@@ -31,8 +31,9 @@ struct JsonReport<'a> {
     wall_seconds: f64,
 }
 
-/// Runs the evaluation and prints the report.
-pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
+/// The scenario and the policy that `args` name, checked to fit the action
+/// set; errors name the flag at fault.
+pub fn load(args: &PolicyArgs) -> anyhow::Result<(Arc<Scenario>, Box<dyn Policy>)> {
     let scenario = Arc::new(
         Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
     );
@@ -44,8 +45,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
             args.actions.name()
         )
     })?;
+    Ok((scenario, policy))
+}
+
+/// Runs the evaluation and prints the report.
+pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
+    let (scenario, policy) = load(&args.run)?;
     anyhow::ensure!(args.trials > 0, "--trials must be at least 1");
-    let config = EvalConfig::new(args.actions, args.trials, args.seed);
+    let config = EvalConfig::new(args.run.actions, args.trials, args.seed);
 
     let bar = progress::bar(args.trials, "trials");
     bar.set_message(format!("{} on {}", policy.name(), scenario.name()));

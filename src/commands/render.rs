@@ -9,8 +9,8 @@ use std::sync::Arc;
 
 use anyhow::{Context, anyhow, bail, ensure};
 use crossroads_sim::{
-    Color, Control, Env, EnvConfig, PolicyRng, RenderView, Scenario, Scene, SceneOptions, Shape,
-    episode_seed, palette, parse_policy, policy_seed,
+    Color, Control, Env, EnvConfig, PolicyRng, RenderView, Scene, SceneOptions, Shape,
+    episode_seed, palette, policy_seed,
 };
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -112,7 +112,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<ExitCode> {
     };
     println!(
         "{}: {}; wrote {} ({frames} frame{})",
-        args.scenario,
+        args.run.scenario,
         episode.summary,
         args.out.display(),
         if frames == 1 { "" } else { "s" }
@@ -123,18 +123,8 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<ExitCode> {
 /// Plays trial `args.trial` of seed `args.seed` (the same episode as
 /// `crossroads eval` plays) and records a scene after every step.
 fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
-    let scenario = Arc::new(
-        Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
-    );
-    let policy = parse_policy(&args.policy).context("--policy")?;
-    policy.supports(args.actions).with_context(|| {
-        format!(
-            "--policy {} with --actions {}",
-            args.policy,
-            args.actions.name()
-        )
-    })?;
-    let config = EnvConfig::for_actions(args.actions);
+    let (scenario, policy) = super::eval::load(&args.run)?;
+    let config = EnvConfig::for_actions(args.run.actions);
     let options = SceneOptions {
         grid: args.grid.then_some(config.observation),
     };
@@ -155,7 +145,7 @@ fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
     while !env.is_done() {
         let mut action = [0];
         policy.act(std::slice::from_ref(&env), &mut rng, &mut action)?;
-        if go_at.is_none() && args.actions.decode(action[0])? == Control::Go {
+        if go_at.is_none() && args.run.actions.decode(action[0])? == Control::Go {
             go_at = Some(scenes.len() - 1);
         }
         env.step_with(action[0], |e| scenes.push(Scene::of(e, &view, &options)))?;
