@@ -249,6 +249,11 @@ impl Actor {
             summary.sim_steps += u64::from(r.steps);
             if let Some(end) = r.episode {
                 self.metrics.episode(mode, &end);
+                if training {
+                    tracing::debug!(scenario = self.settings.scenario.name(), outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "episode");
+                } else {
+                    tracing::info!(scenario = self.settings.scenario.name(), outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "evaluation episode");
+                }
                 summary.episodes.push(end);
             }
             if training {

@@ -96,7 +96,7 @@ impl PushBuffer {
     /// Waits until a batch may be there (a push since the last wait), at
     /// most `timeout`.
     pub async fn wait(&self, timeout: Duration) {
-        if self.len() > 0 {
+        if !self.is_empty() {
             return;
         }
         let _ = tokio::time::timeout(timeout, self.notify.notified()).await;

@@ -13,7 +13,8 @@
 //! [`TransitionBatch`](crossroads_common::TransitionBatch)es. A [`Pusher`]
 //! delivers batches over gRPC or iceoryx2 ([`PushConfig`]) from a bounded
 //! [`PushBuffer`] (oldest dropped first), retrying with backoff and
-//! reconnecting. [`ActorMetrics`] are the `crossroads_actor_*` metrics.
+//! reconnecting. [`EpisodeStats`] sums episode ends for evaluation reports;
+//! [`ActorMetrics`] are the `crossroads_actor_*` metrics.
 //! Configuration: the `[actor]` section ([`crossroads_common::ActorConfig`])
 //! through [`ActorSettings::from_config`] and [`resolve_index`].
 
@@ -24,6 +25,7 @@ mod exploration;
 mod metrics;
 mod nstep;
 mod push;
+mod stats;
 mod values;
 mod vec_env;
 
@@ -36,5 +38,6 @@ pub use nstep::{
     BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,
 };
 pub use push::{PushConfig, Pusher};
+pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};
 pub use vec_env::{EnvStep, EpisodeEnd, VecEnv, batch_spec};

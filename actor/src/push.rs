@@ -226,6 +226,12 @@ async fn grpc_worker(ctx: Ctx, client: ReplayClient) {
             let at = Instant::now();
             match s.send(batch.clone()).await {
                 Ok(_) => sent.push_back(Sent { batch, at }),
+                // Refused before it left (too large for one message): the
+                // stream is still good.
+                Err(e) if !e.is_retryable() => {
+                    tracing::warn!(error = %e, transitions = batch.len(), "a batch cannot be sent; dropped");
+                    ctx.metrics.dropped("rejected", batch.len() as u64);
+                }
                 Err(e) => {
                     sent.push_back(Sent { batch, at });
                     stream = None;
@@ -265,8 +271,9 @@ async fn grpc_worker(ctx: Ctx, client: ReplayClient) {
     }
 }
 
-/// After a failed call: a batch the server refuses is dropped (counted),
-/// the rest go back to the buffer; then a backoff.
+/// After a failed call: when the server refused the oldest batch in flight
+/// (a status no retry changes), that one is dropped and counted; the rest
+/// go back to the buffer; then a backoff.
 async fn grpc_failed(ctx: &Ctx, e: &ClientError, sent: &mut VecDeque<Sent>, backoff: &mut Backoff) {
     ctx.metrics.retry("grpc");
     if !e.is_retryable()

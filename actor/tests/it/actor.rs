@@ -1,7 +1,7 @@
 //! The actor's core: batches of valid n-step transitions, one forward pass
 //! per step, the epsilon ladder from the config, greedy evaluation.
 
-use crossroads_actor::{ActorSettings, Mode, resolve_index};
+use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
 use crossroads_common::{ActorConfig, ConfigLoader};
 use crossroads_sim::Outcome;
 
@@ -52,10 +52,17 @@ fn evaluation_is_greedy_and_pushes_nothing() {
     let (mut a, mut values) = actor(&config, 0);
     assert_eq!(a.settings().mode, Mode::Greedy);
     let mut ended = 0;
+    let mut stats = EpisodeStats::default();
     for _ in 0..400 {
-        ended += a.step(&mut values).expect("step").episodes.len();
+        let summary = a.step(&mut values).expect("step");
+        ended += summary.episodes.len();
+        summary.episodes.iter().for_each(|e| stats.record(e));
         assert!(a.take_batch().is_none());
     }
+    assert_eq!(stats.episodes(), ended as u64);
+    let rates = stats.success_rate() + stats.collision_rate() + stats.timeout_rate();
+    assert!((rates - 1.0).abs() < 1e-9, "{stats:?}");
+    assert!(stats.successes == 0 || stats.mean_success_time_s() > 0.0);
     assert!(a.flush_batch().is_none());
     assert!(ended > 0, "episodes end");
     let m = a.metrics();
