@@ -5,13 +5,15 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use crossroads_common::codec::ObservationEncoding;
-use crossroads_common::{ActorConfig, TransitionBatch};
+use crossroads_common::{ActorConfig, Shutdown, TransitionBatch};
 use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
 
 use crate::error::ActorError;
 use crate::exploration::{EpsilonGreedy, Mode, epsilon_ladder};
 use crate::metrics::ActorMetrics;
 use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
+use crate::push::Pusher;
+use crate::stats::EpisodeStats;
 use crate::values::ActionValues;
 use crate::vec_env::{EpisodeEnd, VecEnv};
 
@@ -117,6 +119,19 @@ pub fn hostname() -> Option<String> {
                 .map(|h| h.trim().to_owned())
                 .filter(|h| !h.is_empty())
         })
+}
+
+/// What an [`Actor::run`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunReport {
+    /// Vectorized steps (forward passes).
+    pub steps: u64,
+    /// Simulation steps, summed over environments.
+    pub sim_steps: u64,
+    /// Transitions assembled (all handed to the pusher).
+    pub transitions: u64,
+    /// The episodes that ended.
+    pub episodes: EpisodeStats,
 }
 
 /// What one [`Actor::step`] did.
@@ -282,6 +297,41 @@ impl Actor {
             .transitions_assembled
             .inc_by(summary.transitions);
         Ok(summary)
+    }
+
+    /// Steps until `shutdown` fires (or `max_steps` steps), handing every
+    /// full batch to `pusher` (when training), then the partial one.
+    /// Blocking: run it on a thread of its own (`spawn_blocking`). The
+    /// network is the caller's: an implementation that applies newer
+    /// weights at the start of `q_values` picks them up between steps
+    /// without pausing the environments.
+    pub fn run(
+        &mut self,
+        values: &mut dyn ActionValues,
+        pusher: Option<&Pusher>,
+        shutdown: &Shutdown,
+        max_steps: Option<u64>,
+    ) -> Result<RunReport, ActorError> {
+        let mut report = RunReport::default();
+        while !shutdown.is_triggered() && max_steps.is_none_or(|m| report.steps < m) {
+            let summary = self.step(values)?;
+            report.steps += 1;
+            report.sim_steps += summary.sim_steps;
+            report.transitions += summary.transitions;
+            summary
+                .episodes
+                .iter()
+                .for_each(|e| report.episodes.record(e));
+            while let Some(batch) = self.take_batch() {
+                if let Some(p) = pusher {
+                    p.push(batch);
+                }
+            }
+        }
+        if let (Some(p), Some(batch)) = (pusher, self.flush_batch()) {
+            p.push(batch);
+        }
+        Ok(report)
     }
 
     /// A full batch, oldest first, if one is ready.

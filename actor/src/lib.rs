@@ -10,13 +10,14 @@
 //! greedy in evaluation [`Mode`]), steps the environments and assembles
 //! n-step transitions over k-step actions with initial priorities from its
 //! own Q estimates; a [`BatchBuilder`] packs them into
-//! [`TransitionBatch`](crossroads_common::TransitionBatch)es. A [`Pusher`]
-//! delivers batches over gRPC or iceoryx2 ([`PushConfig`]) from a bounded
-//! [`PushBuffer`] (oldest dropped first), retrying with backoff and
-//! reconnecting. [`EpisodeStats`] sums episode ends for evaluation reports;
-//! [`ActorMetrics`] are the `crossroads_actor_*` metrics.
-//! Configuration: the `[actor]` section ([`crossroads_common::ActorConfig`])
-//! through [`ActorSettings::from_config`] and [`resolve_index`].
+//! [`TransitionBatch`](crossroads_common::TransitionBatch)es.
+//! [`Actor::run`] is the acting loop. A [`Pusher`] delivers batches over
+//! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`] (oldest
+//! dropped first), retrying with backoff and reconnecting.
+//! [`EpisodeStats`] sums episode ends for evaluation reports;
+//! [`ActorMetrics`] are the `crossroads_actor_*` metrics. Configuration:
+//! the `[actor]` section ([`crossroads_common::ActorConfig`]) through
+//! [`ActorSettings::from_config`] and [`resolve_index`].
 
 mod actor;
 mod buffer;
@@ -29,7 +30,9 @@ mod stats;
 mod values;
 mod vec_env;
 
-pub use actor::{Actor, ActorSettings, StepSummary, actor_seed, hostname, resolve_index};
+pub use actor::{
+    Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
+};
 pub use buffer::PushBuffer;
 pub use error::ActorError;
 pub use exploration::{EpsilonGreedy, Mode, epsilon_ladder};

@@ -191,3 +191,40 @@ async fn the_grpc_pusher_survives_a_replay_restart() {
 async fn the_shm_pusher_survives_a_replay_restart() {
     survives_a_restart(ActorTransport::Shm).await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_acting_loop_delivers_every_transition_it_assembles() {
+    let shutdown = Shutdown::new();
+    let server =
+        crossroads_replay::start(&replay_config("127.0.0.1:0", None), None, shutdown.clone())
+            .await
+            .expect("replay");
+    let endpoint = format!("http://{}", server.local_addr());
+    let (mut a, mut v) = actor(&actor_config(4, 24), 0);
+    let pusher = Pusher::start(
+        &push_config(ActorTransport::Grpc, &endpoint, "unused", 1024),
+        a.metrics().clone(),
+        &shutdown,
+    )
+    .expect("pusher");
+    let stop = Shutdown::new();
+    let (report, pusher) = tokio::task::spawn_blocking(move || {
+        let report = a.run(&mut v, Some(&pusher), &stop, Some(150));
+        (report, pusher)
+    })
+    .await
+    .expect("acting thread");
+    let report = report.expect("run");
+    assert_eq!(report.steps, 150);
+    assert!(report.transitions > 24, "{report:?}");
+    assert!(report.episodes.episodes() > 0);
+    pusher.close(Duration::from_secs(10)).await;
+    let table = server.table("t").expect("table");
+    assert_eq!(
+        table.stats().size,
+        report.transitions,
+        "full batches and the last partial one"
+    );
+    shutdown.trigger();
+    server.join().await.expect("clean stop");
+}
