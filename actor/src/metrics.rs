@@ -168,6 +168,14 @@ impl ActorMetrics {
         })
     }
 
+    /// The weights in use: their version and their age in seconds (from
+    /// publication to now), for the weights subscriber.
+    pub fn weights(&self, version: u64, age_s: f64) {
+        self.weights_version
+            .set(i64::try_from(version).unwrap_or(i64::MAX));
+        self.weights_staleness.set(age_s.max(0.0));
+    }
+
     /// Simulation steps and decisions taken.
     pub fn stepped(&self, sim_steps: u64, decisions: u64) {
         self.env_steps.inc_by(sim_steps);
