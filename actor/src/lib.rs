@@ -1,4 +1,46 @@
-//! Actors: vectorized environments, batched inference, exploration, n-step
-//! assembly and transport of transitions to the replay server.
+//! Actors: the processes that turn simulator steps into prioritized n-step
+//! transitions for the replay server.
 //!
-//! Its content lands with issue 6; until then the crate is empty.
+//! An [`Actor`] owns a [`VecEnv`] (M environments of one scenario stepped in
+//! parallel with rayon, their observations in one contiguous buffer) and
+//! per environment an [`NStepAssembler`]. Each [`Actor::step`] makes one
+//! batched call of an [`ActionValues`] (the Q-network, supplied by the
+//! caller so it can swap weights between steps), chooses actions with
+//! [`EpsilonGreedy`] (epsilon from the Ape-X ladder, [`epsilon_ladder`], or
+//! greedy in evaluation [`Mode`]), steps the environments and assembles
+//! n-step transitions over k-step actions with initial priorities from its
+//! own Q estimates; a [`BatchBuilder`] packs them into
+//! [`TransitionBatch`](crossroads_common::TransitionBatch)es.
+//! [`Actor::run`] is the acting loop. A [`Pusher`] delivers batches over
+//! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`] (oldest
+//! dropped first), retrying with backoff and reconnecting.
+//! [`EpisodeStats`] sums episode ends for evaluation reports;
+//! [`ActorMetrics`] are the `crossroads_actor_*` metrics. Configuration:
+//! the `[actor]` section ([`crossroads_common::ActorConfig`]) through
+//! [`ActorSettings::from_config`] and [`resolve_index`].
+
+mod actor;
+mod buffer;
+mod error;
+mod exploration;
+mod metrics;
+mod nstep;
+mod push;
+mod stats;
+mod values;
+mod vec_env;
+
+pub use actor::{
+    Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
+};
+pub use buffer::PushBuffer;
+pub use error::ActorError;
+pub use exploration::{EpsilonGreedy, Mode, epsilon_ladder};
+pub use metrics::ActorMetrics;
+pub use nstep::{
+    BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,
+};
+pub use push::{PushConfig, Pusher};
+pub use stats::EpisodeStats;
+pub use values::{ActionValues, ValuesError, argmax, max_value};
+pub use vec_env::{EnvStep, EpisodeEnd, VecEnv, batch_spec};

@@ -18,6 +18,10 @@ use figment::value::{Dict, Map};
 use figment::{Figment, Metadata, Profile, Provider, Source};
 use serde::{Deserialize, Serialize};
 
+pub mod actor;
+
+pub use actor::{ActorConfig, ActorTransport};
+
 const DEFAULTS: &str = "defaults";
 const COMMAND_LINE: &str = "command line";
 
@@ -37,6 +41,9 @@ pub struct Config {
     /// How roles reach each other: the replay server's address, shared
     /// memory services, timeouts and retries.
     pub transport: TransportConfig,
+    /// Actor processes: environments, exploration, n-step assembly and
+    /// transport of transitions.
+    pub actor: ActorConfig,
 }
 
 /// Threads of the process.
@@ -395,6 +402,7 @@ impl Config {
                 t.shm_initial_batch_bytes
             ),
         );
+        problems.extend(self.actor.validate());
         problems
     }
 

@@ -1,0 +1,361 @@
+//! The acting loop's core: one vectorized step at a time, from Q-values to
+//! actions, environment steps, n-step transitions and batches.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use crossroads_common::codec::ObservationEncoding;
+use crossroads_common::{ActorConfig, Shutdown, TransitionBatch};
+use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
+
+use crate::error::ActorError;
+use crate::exploration::{EpsilonGreedy, Mode, epsilon_ladder};
+use crate::metrics::ActorMetrics;
+use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
+use crate::push::Pusher;
+use crate::stats::EpisodeStats;
+use crate::values::ActionValues;
+use crate::vec_env::{EpisodeEnd, VecEnv};
+
+/// Everything an [`Actor`] needs, resolved from the config.
+#[derive(Debug, Clone)]
+pub struct ActorSettings {
+    /// The scenario, compiled.
+    pub scenario: Arc<Scenario>,
+    /// The action set.
+    pub action_set: ActionSet,
+    /// Environments, M.
+    pub envs: usize,
+    /// Decisions per n-step transition.
+    pub n_step: usize,
+    /// Discount per simulation step.
+    pub gamma: f64,
+    /// Transitions per batch.
+    pub batch_size: usize,
+    /// This actor's index i and the actor count N.
+    pub index: u32,
+    /// The actor count N.
+    pub count: u32,
+    /// This actor's seed (derived from the run's seed and the index).
+    pub seed: u64,
+    /// Exploration or greedy evaluation.
+    pub mode: Mode,
+}
+
+impl ActorSettings {
+    /// From `[actor]`, for actor `index` (see [`resolve_index`]).
+    pub fn from_config(config: &ActorConfig, index: u32) -> Result<Self, ActorError> {
+        let scenario = Arc::new(Scenario::load(&config.scenario)?);
+        let action_set: ActionSet = config
+            .action_set
+            .parse()
+            .map_err(|e: crossroads_sim::SimError| ActorError::Config(e.to_string()))?;
+        let count = config.count.max(1);
+        if index >= count {
+            return Err(ActorError::Config(format!(
+                "actor index {index} is not below actor.count {count}"
+            )));
+        }
+        let mode = if config.eval {
+            Mode::Greedy
+        } else {
+            Mode::Explore {
+                epsilon: epsilon_ladder(index, count, config.epsilon_base, config.epsilon_alpha),
+            }
+        };
+        Ok(Self {
+            scenario,
+            action_set,
+            envs: config.envs.max(1),
+            n_step: config.n_step.max(1) as usize,
+            gamma: config.gamma,
+            batch_size: config.batch_size.max(1),
+            index,
+            count,
+            seed: actor_seed(config.seed, index),
+            mode,
+        })
+    }
+}
+
+/// The seed of actor `index` in a run seeded `run_seed`.
+pub fn actor_seed(run_seed: u64, index: u32) -> u64 {
+    episode_seed(splitmix64(run_seed ^ 0xAC70_0000), u64::from(index))
+}
+
+/// This actor's index: `configured` when set, else the ordinal at the end of
+/// `hostname` (`crossroads-actor-3` gives 3, as Kubernetes StatefulSet pods
+/// are named) modulo `count`, else 0.
+pub fn resolve_index(configured: Option<u32>, count: u32, hostname: Option<&str>) -> u32 {
+    if let Some(i) = configured {
+        return i;
+    }
+    let ordinal = hostname.and_then(|h| {
+        let digits: String = h
+            .trim()
+            .chars()
+            .rev()
+            .take_while(char::is_ascii_digit)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect();
+        digits.parse::<u64>().ok()
+    });
+    match ordinal {
+        Some(o) => (o % u64::from(count.max(1))) as u32,
+        None => 0,
+    }
+}
+
+/// The host name, from `HOSTNAME` or `/etc/hostname`.
+pub fn hostname() -> Option<String> {
+    std::env::var("HOSTNAME")
+        .ok()
+        .filter(|h| !h.is_empty())
+        .or_else(|| {
+            std::fs::read_to_string("/etc/hostname")
+                .ok()
+                .map(|h| h.trim().to_owned())
+                .filter(|h| !h.is_empty())
+        })
+}
+
+/// What an [`Actor::run`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunReport {
+    /// Vectorized steps (forward passes).
+    pub steps: u64,
+    /// Simulation steps, summed over environments.
+    pub sim_steps: u64,
+    /// Transitions assembled (all handed to the pusher).
+    pub transitions: u64,
+    /// The episodes that ended.
+    pub episodes: EpisodeStats,
+}
+
+/// What one [`Actor::step`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StepSummary {
+    /// Simulation steps taken, summed over environments.
+    pub sim_steps: u64,
+    /// Decisions taken (one per environment).
+    pub decisions: u64,
+    /// Transitions assembled.
+    pub transitions: u64,
+    /// Episodes that ended.
+    pub episodes: Vec<EpisodeEnd>,
+}
+
+/// An actor's environments, exploration and n-step assembly. Each
+/// [`step`](Self::step) is one batched forward pass of the caller's
+/// [`ActionValues`] (so the caller may swap weights between steps), one
+/// action per environment and one parallel environment step; in training
+/// mode full batches of transitions queue up for
+/// [`take_batch`](Self::take_batch). Not thread-safe; one per acting loop.
+#[derive(Debug)]
+pub struct Actor {
+    settings: ActorSettings,
+    envs: VecEnv,
+    explorer: EpsilonGreedy,
+    assemblers: Vec<NStepAssembler>,
+    current: Vec<Option<ObsRef>>,
+    q: Vec<f32>,
+    actions: Vec<usize>,
+    emitted: Vec<NStepTransition>,
+    builder: BatchBuilder,
+    ready: VecDeque<TransitionBatch>,
+    next_obs_id: u64,
+    metrics: ActorMetrics,
+}
+
+impl Actor {
+    /// An actor with its environments reset.
+    pub fn new(settings: ActorSettings, metrics: ActorMetrics) -> Result<Self, ActorError> {
+        let mut env_config = EnvConfig::for_actions(settings.action_set);
+        env_config.gamma = settings.gamma;
+        let training = settings.mode.is_training();
+        let encoding = ObservationEncoding::SparseF32;
+        let envs = VecEnv::new(
+            Arc::clone(&settings.scenario),
+            env_config,
+            settings.envs,
+            settings.seed,
+            training.then_some(encoding),
+        )?;
+        let m = envs.len();
+        let num_actions = envs.num_actions();
+        let builder = BatchBuilder::new(envs.batch_spec(), num_actions as u32, encoding);
+        metrics.epsilon.set(settings.mode.epsilon());
+        let mut actor = Self {
+            explorer: EpsilonGreedy::new(settings.mode, m, settings.seed),
+            assemblers: vec![NStepAssembler::new(settings.n_step, settings.gamma); m],
+            current: vec![None; m],
+            q: vec![0.0; m * num_actions],
+            actions: vec![0; m],
+            emitted: Vec::new(),
+            builder,
+            ready: VecDeque::new(),
+            next_obs_id: 0,
+            metrics,
+            envs,
+            settings,
+        };
+        if training {
+            for i in 0..m {
+                actor.current[i] = Some(actor.intern(i, false));
+            }
+        }
+        Ok(actor)
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &ActorSettings {
+        &self.settings
+    }
+
+    /// The environments.
+    pub fn envs(&self) -> &VecEnv {
+        &self.envs
+    }
+
+    /// The metrics handles.
+    pub fn metrics(&self) -> &ActorMetrics {
+        &self.metrics
+    }
+
+    /// One vectorized step: Q-values of every environment's observation in
+    /// one call of `values`, epsilon-greedy actions, a parallel environment
+    /// step, n-step transitions (training mode).
+    pub fn step(&mut self, values: &mut dyn ActionValues) -> Result<StepSummary, ActorError> {
+        let m = self.envs.len();
+        let a = self.envs.num_actions();
+        if values.obs_len() != self.envs.obs_len() || values.num_actions() != a {
+            return Err(ActorError::Values(format!(
+                "the network reads {} values and scores {} actions; the environments give {} ({}) and take {} ({})",
+                values.obs_len(),
+                values.num_actions(),
+                self.envs.obs_len(),
+                self.envs.batch_spec(),
+                a,
+                self.settings.action_set
+            )));
+        }
+        values
+            .q_values(self.envs.observations(), m, &mut self.q)
+            .map_err(|e| ActorError::Values(e.to_string()))?;
+        let training = self.settings.mode.is_training();
+        if training {
+            for i in 0..m {
+                if let Some(obs) = self.current[i].take() {
+                    self.assemblers[i].begin(obs, &self.q[i * a..(i + 1) * a], &mut self.emitted);
+                }
+            }
+        }
+        self.explorer.choose(&self.q, a, &mut self.actions);
+        let results = self.envs.step(&self.actions)?.to_vec();
+
+        let mut summary = StepSummary {
+            decisions: m as u64,
+            ..StepSummary::default()
+        };
+        let mode = if training { "train" } else { "eval" };
+        for (i, r) in results.iter().enumerate() {
+            summary.sim_steps += u64::from(r.steps);
+            if let Some(end) = r.episode {
+                self.metrics.episode(mode, &end);
+                if training {
+                    tracing::debug!(scenario = self.settings.scenario.name(), outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "episode");
+                } else {
+                    tracing::info!(scenario = self.settings.scenario.name(), outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "evaluation episode");
+                }
+                summary.episodes.push(end);
+            }
+            if training {
+                let action = self.actions[i];
+                let terminal = r.done.then(|| self.intern(i, true));
+                self.assemblers[i].record(
+                    action as u32,
+                    self.q[i * a + action],
+                    r.reward,
+                    r.steps,
+                    terminal,
+                    &mut self.emitted,
+                );
+                self.current[i] = Some(self.intern(i, false));
+            }
+        }
+        summary.transitions = self.emitted.len() as u64;
+        for t in self.emitted.drain(..) {
+            self.builder.push(&t);
+            if self.builder.len() >= self.settings.batch_size {
+                self.ready.push_back(self.builder.take());
+            }
+        }
+        self.metrics.stepped(summary.sim_steps, summary.decisions);
+        self.metrics
+            .transitions_assembled
+            .inc_by(summary.transitions);
+        Ok(summary)
+    }
+
+    /// Steps until `shutdown` fires (or `max_steps` steps), handing every
+    /// full batch to `pusher` (when training), then the partial one.
+    /// Blocking: run it on a thread of its own (`spawn_blocking`). The
+    /// network is the caller's: an implementation that applies newer
+    /// weights at the start of `q_values` picks them up between steps
+    /// without pausing the environments.
+    pub fn run(
+        &mut self,
+        values: &mut dyn ActionValues,
+        pusher: Option<&Pusher>,
+        shutdown: &Shutdown,
+        max_steps: Option<u64>,
+    ) -> Result<RunReport, ActorError> {
+        let mut report = RunReport::default();
+        while !shutdown.is_triggered() && max_steps.is_none_or(|m| report.steps < m) {
+            let summary = self.step(values)?;
+            report.steps += 1;
+            report.sim_steps += summary.sim_steps;
+            report.transitions += summary.transitions;
+            summary
+                .episodes
+                .iter()
+                .for_each(|e| report.episodes.record(e));
+            while let Some(batch) = self.take_batch() {
+                if let Some(p) = pusher {
+                    p.push(batch);
+                }
+            }
+        }
+        if let (Some(p), Some(batch)) = (pusher, self.flush_batch()) {
+            p.push(batch);
+        }
+        Ok(report)
+    }
+
+    /// A full batch, oldest first, if one is ready.
+    pub fn take_batch(&mut self) -> Option<TransitionBatch> {
+        self.ready.pop_front()
+    }
+
+    /// Whatever is collected, full or not (at shutdown); `None` when
+    /// nothing is.
+    pub fn flush_batch(&mut self) -> Option<TransitionBatch> {
+        if let Some(b) = self.ready.pop_front() {
+            return Some(b);
+        }
+        (!self.builder.is_empty()).then(|| self.builder.take())
+    }
+
+    fn intern(&mut self, i: usize, terminal: bool) -> ObsRef {
+        let bytes = if terminal {
+            self.envs.take_terminal(i)
+        } else {
+            self.envs.take_encoded(i)
+        };
+        let id = self.next_obs_id;
+        self.next_obs_id += 1;
+        Arc::new(EncodedObs { id, bytes })
+    }
+}

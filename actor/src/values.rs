@@ -1,0 +1,97 @@
+//! The one thing the actor needs from a Q-network: batched action values.
+
+/// Error of an [`ActionValues`] implementation (a forward pass that failed,
+/// weights that do not fit).
+pub type ValuesError = Box<dyn std::error::Error + Send + Sync>;
+
+/// Batched Q-values: for `n` observations of [`obs_len`](Self::obs_len)
+/// values each, back to back in one flat slice (row-major `n x obs_len`),
+/// writes `n x num_actions` values, row-major, into `out`.
+///
+/// Cost: one forward pass per call, whatever `n`; the actor calls it once
+/// per vectorized step with every environment's observation. Thread safety:
+/// called from one thread; `&mut self` lets an implementation reuse its
+/// buffers and swap in newer weights between calls.
+pub trait ActionValues {
+    /// Values in one observation.
+    fn obs_len(&self) -> usize;
+
+    /// Actions scored per observation.
+    fn num_actions(&self) -> usize;
+
+    /// Writes the Q-values of `observations` (`n x obs_len`) into `out`
+    /// (`n x num_actions`).
+    fn q_values(
+        &mut self,
+        observations: &[f32],
+        n: usize,
+        out: &mut [f32],
+    ) -> Result<(), ValuesError>;
+}
+
+impl<T: ActionValues + ?Sized> ActionValues for &mut T {
+    fn obs_len(&self) -> usize {
+        (**self).obs_len()
+    }
+
+    fn num_actions(&self) -> usize {
+        (**self).num_actions()
+    }
+
+    fn q_values(
+        &mut self,
+        observations: &[f32],
+        n: usize,
+        out: &mut [f32],
+    ) -> Result<(), ValuesError> {
+        (**self).q_values(observations, n, out)
+    }
+}
+
+impl<T: ActionValues + ?Sized> ActionValues for Box<T> {
+    fn obs_len(&self) -> usize {
+        (**self).obs_len()
+    }
+
+    fn num_actions(&self) -> usize {
+        (**self).num_actions()
+    }
+
+    fn q_values(
+        &mut self,
+        observations: &[f32],
+        n: usize,
+        out: &mut [f32],
+    ) -> Result<(), ValuesError> {
+        (**self).q_values(observations, n, out)
+    }
+}
+
+/// Index of the largest value; the first on ties, and NaN never wins
+/// (a row of NaN gives 0).
+pub fn argmax(row: &[f32]) -> usize {
+    let mut best = 0;
+    let mut best_value = f32::NEG_INFINITY;
+    for (i, &v) in row.iter().enumerate() {
+        if v > best_value {
+            best = i;
+            best_value = v;
+        }
+    }
+    best
+}
+
+/// The largest value of a row (the greedy bootstrap), ignoring NaN; 0 for
+/// an empty or all-NaN row.
+pub fn max_value(row: &[f32]) -> f32 {
+    let m = row
+        .iter()
+        .copied()
+        .filter(|v| !v.is_nan())
+        .fold(f32::NEG_INFINITY, f32::max);
+    if m.is_finite() || m == f32::INFINITY {
+        m
+    } else {
+        0.0
+    }
+}

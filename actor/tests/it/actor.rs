@@ -1,0 +1,137 @@
+//! The actor's core: batches of valid n-step transitions, one forward pass
+//! per step, the epsilon ladder from the config, greedy evaluation.
+
+use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
+use crossroads_common::{ActorConfig, ConfigLoader};
+use crossroads_sim::Outcome;
+
+use crate::util::{actor, actor_config, batches};
+
+#[test]
+fn training_fills_valid_batches_with_one_forward_pass_per_step() {
+    let config = actor_config(4, 32);
+    let (mut a, mut values) = actor(&config, 0);
+    let out = batches(&mut a, &mut values, 3);
+    for b in &out {
+        b.validate().expect("valid batch");
+        assert_eq!(b.len(), 32);
+        assert_eq!(b.num_actions, 5);
+        assert_eq!(b.spec.kind, "ttg");
+        assert!(b.observations.len() < 2 * b.len(), "observations shared");
+        assert!(b.discounts.iter().all(|d| *d == 0.0 || *d <= 0.99));
+        assert!(b.priorities.iter().all(|p| p.is_finite() && *p >= 0.0));
+    }
+    assert!(
+        out.iter().flat_map(|b| &b.discounts).any(|d| *d == 0.0),
+        "episode ends are terminal"
+    );
+    let eps = a.metrics().epsilon.get();
+    assert!(
+        (eps - 0.4).abs() < 1e-12,
+        "a single actor explores with 0.4"
+    );
+    let forward = values.calls;
+    let decisions: u64 = forward as u64 * 4;
+    assert!(decisions >= 96, "{forward} forward passes for 4 envs");
+}
+
+#[test]
+fn the_same_seed_gives_the_same_batches() {
+    let config = actor_config(3, 16);
+    let run = || {
+        let (mut a, mut v) = actor(&config, 0);
+        batches(&mut a, &mut v, 2)
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn evaluation_is_greedy_and_pushes_nothing() {
+    let mut config = actor_config(4, 8);
+    config.eval = true;
+    let (mut a, mut values) = actor(&config, 0);
+    assert_eq!(a.settings().mode, Mode::Greedy);
+    let mut ended = 0;
+    let mut stats = EpisodeStats::default();
+    for _ in 0..400 {
+        let summary = a.step(&mut values).expect("step");
+        ended += summary.episodes.len();
+        summary.episodes.iter().for_each(|e| stats.record(e));
+        assert!(a.take_batch().is_none());
+    }
+    assert_eq!(stats.episodes(), ended as u64);
+    let rates = stats.success_rate() + stats.collision_rate() + stats.timeout_rate();
+    assert!((rates - 1.0).abs() < 1e-9, "{stats:?}");
+    assert!(stats.successes == 0 || stats.mean_success_time_s() > 0.0);
+    assert!(a.flush_batch().is_none());
+    assert!(ended > 0, "episodes end");
+    let m = a.metrics();
+    let counted: u64 = [Outcome::Success, Outcome::Collision, Outcome::Timeout]
+        .into_iter()
+        .map(|o| m.episodes("eval", o))
+        .sum();
+    assert_eq!(counted, ended as u64);
+    assert_eq!(m.epsilon.get(), 0.0);
+}
+
+#[test]
+fn the_ladder_comes_from_index_and_count() {
+    let mut config = ActorConfig {
+        count: 8,
+        ..ActorConfig::default()
+    };
+    let eps = |c: &ActorConfig, i| {
+        ActorSettings::from_config(c, i)
+            .expect("settings")
+            .mode
+            .epsilon()
+    };
+    assert!((eps(&config, 0) - 0.4).abs() < 1e-12);
+    assert!((eps(&config, 1) - 0.16).abs() < 1e-12);
+    assert!((eps(&config, 7) - 0.4f64.powi(8)).abs() < 1e-15);
+    assert!(ActorSettings::from_config(&config, 8).is_err());
+    config.count = 1;
+    assert_eq!(eps(&config, 0), 0.4);
+    let a = ActorSettings::from_config(
+        &ActorConfig {
+            count: 8,
+            ..config.clone()
+        },
+        1,
+    )
+    .expect("settings");
+    let b = ActorSettings::from_config(&ActorConfig { count: 8, ..config }, 2).expect("settings");
+    assert_ne!(a.seed, b.seed, "each actor its own seed");
+}
+
+#[test]
+fn the_index_comes_from_the_config_the_environment_or_the_host_name() {
+    assert_eq!(resolve_index(Some(3), 8, Some("actor-5")), 3);
+    assert_eq!(resolve_index(None, 8, Some("crossroads-actor-5")), 5);
+    assert_eq!(resolve_index(None, 4, Some("actor-6")), 2);
+    assert_eq!(resolve_index(None, 4, Some("3f9c2a")), 0);
+    assert_eq!(resolve_index(None, 4, None), 0);
+
+    let config = ConfigLoader::new()
+        .without_env()
+        .sets(["actor.index=2", "actor.count=4", "actor.transport=shm"])
+        .load()
+        .expect("config");
+    assert_eq!((config.actor.index, config.actor.count), (Some(2), 4));
+    assert_eq!(
+        config.actor.transport,
+        crossroads_common::ActorTransport::Shm
+    );
+    let err = ConfigLoader::new()
+        .without_env()
+        .sets(["actor.index=4", "actor.count=4"])
+        .load()
+        .expect_err("index out of range");
+    assert_eq!(err.problems()[0].key, "actor.index");
+    let err = ConfigLoader::new()
+        .without_env()
+        .sets(["actor.gamma=1.5"])
+        .load()
+        .expect_err("gamma");
+    assert_eq!(err.problems()[0].key, "actor.gamma");
+}

@@ -1,0 +1,7 @@
+//! Integration tests of crossroads-actor, one binary.
+
+mod actor;
+mod nstep;
+mod push;
+mod util;
+mod vec_env;

@@ -1,0 +1,230 @@
+//! Pushing to a real replay server on loopback, over gRPC and over
+//! iceoryx2; surviving the server's stop and restart.
+
+use std::time::Duration;
+
+use crossroads_actor::{ActorMetrics, PushConfig, Pusher};
+use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_common::{ActorTransport, Shutdown, TransitionBatch};
+
+use crate::util::{
+    actor, actor_config, batches, eventually, replay_config, transport, unique_prefix,
+};
+
+fn some_batches(n: usize, size: usize) -> Vec<TransitionBatch> {
+    let (mut a, mut v) = actor(&actor_config(4, size), 0);
+    batches(&mut a, &mut v, n)
+}
+
+fn push_config(kind: ActorTransport, endpoint: &str, prefix: &str, buffer: usize) -> PushConfig {
+    PushConfig {
+        transport: kind,
+        connection: transport(endpoint, prefix),
+        table: "t".to_owned(),
+        buffer_batches: buffer,
+        in_flight: 4,
+    }
+}
+
+async fn table_size(client: &ReplayClient) -> u64 {
+    client.info().await.map(|i| i.size).unwrap_or(0)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pushes_reach_a_real_replay_server_over_grpc() {
+    let shutdown = Shutdown::new();
+    let server =
+        crossroads_replay::start(&replay_config("127.0.0.1:0", None), None, shutdown.clone())
+            .await
+            .expect("replay");
+    let endpoint = format!("http://{}", server.local_addr());
+    let registry = crossroads_common::metrics::registry("actor").expect("registry");
+    let metrics = ActorMetrics::new(Some(&registry), "left").expect("metrics");
+    let config = push_config(ActorTransport::Grpc, &endpoint, "unused", 64);
+    let pusher = Pusher::start(&config, metrics.clone(), &shutdown).expect("pusher");
+    for b in some_batches(5, 20) {
+        pusher.push(b);
+    }
+    let client = ReplayClient::new(&config.connection, "t").expect("client");
+    let start = std::time::Instant::now();
+    while table_size(&client).await < 100 {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "replay did not grow"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    pusher.close(Duration::from_secs(5)).await;
+    assert_eq!(table_size(&client).await, 100);
+    assert_eq!(metrics.pushed_total("grpc"), 100);
+    let text = crossroads_common::metrics::render(&registry);
+    for name in [
+        "crossroads_actor_transitions_pushed_total",
+        "crossroads_actor_push_latency_seconds_bucket",
+        "crossroads_actor_transitions_dropped_total",
+        "crossroads_actor_epsilon",
+        "crossroads_actor_weights_version",
+    ] {
+        assert!(text.contains(name), "{name} missing from:\n{text}");
+    }
+    shutdown.trigger();
+    server.join().await.expect("clean stop");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pushes_reach_a_real_replay_server_over_shared_memory() {
+    let prefix = unique_prefix("shm");
+    let shutdown = Shutdown::new();
+    let server = crossroads_replay::start(
+        &replay_config("127.0.0.1:0", Some(&prefix)),
+        None,
+        shutdown.clone(),
+    )
+    .await
+    .expect("replay");
+    let metrics = ActorMetrics::new(None, "left").expect("metrics");
+    let config = push_config(ActorTransport::Shm, "http://127.0.0.1:1", &prefix, 64);
+    let pusher = Pusher::start(&config, metrics.clone(), &shutdown).expect("pusher");
+    for b in some_batches(4, 25) {
+        pusher.push(b);
+    }
+    let table = server.table("t").expect("table");
+    eventually(Duration::from_secs(20), "100 items over iceoryx2", || {
+        table.stats().size >= 100
+    })
+    .await;
+    pusher.close(Duration::from_secs(5)).await;
+    assert_eq!(table.stats().size, 100);
+    assert_eq!(metrics.pushed_total("shm"), 100);
+    shutdown.trigger();
+    server.join().await.expect("clean stop");
+}
+
+/// The server stops; the actor keeps pushing into its bounded buffer
+/// (dropping the oldest, counted) and retrying; a new server on the same
+/// address gets the buffered batches and what follows.
+async fn survives_a_restart(kind: ActorTransport) {
+    let prefix = unique_prefix("restart");
+    let shm = (kind == ActorTransport::Shm).then_some(prefix.as_str());
+    let first = Shutdown::new();
+    let server = crossroads_replay::start(&replay_config("127.0.0.1:0", shm), None, first.clone())
+        .await
+        .expect("replay");
+    let addr = server.local_addr();
+    let endpoint = format!("http://{addr}");
+    let metrics = ActorMetrics::new(None, "left").expect("metrics");
+    let actor_shutdown = Shutdown::new();
+    let label = match kind {
+        ActorTransport::Grpc => "grpc",
+        ActorTransport::Shm => "shm",
+    };
+    let config = push_config(kind, &endpoint, &prefix, 3);
+    let pusher = Pusher::start(&config, metrics.clone(), &actor_shutdown).expect("pusher");
+    let mut all = some_batches(12, 10).into_iter();
+
+    for b in all.by_ref().take(2) {
+        pusher.push(b);
+    }
+    let table = server.table("t").expect("table");
+    eventually(Duration::from_secs(20), "the first batches", || {
+        table.stats().size >= 20
+    })
+    .await;
+    eventually(Duration::from_secs(5), "their acknowledgements", || {
+        metrics.pushed_total(label) >= 20
+    })
+    .await;
+
+    first.trigger();
+    server.join().await.expect("first server stops");
+    // Five batches into a buffer of three while nobody listens: the two
+    // oldest are dropped.
+    for b in all.by_ref().take(5) {
+        pusher.push(b);
+    }
+    eventually(Duration::from_secs(10), "failed attempts", || {
+        metrics.retries_total(label) >= 2
+    })
+    .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(pusher.buffered() <= 3);
+    assert!(
+        metrics.dropped_total("buffer_full") >= 20,
+        "dropped {}",
+        metrics.dropped_total("buffer_full")
+    );
+
+    let second = Shutdown::new();
+    let server =
+        crossroads_replay::start(&replay_config(&addr.to_string(), shm), None, second.clone())
+            .await
+            .expect("replay again, same address");
+    for b in all.by_ref().take(2) {
+        pusher.push(b);
+    }
+    let table = server.table("t").expect("table");
+    // What the buffer kept and the 2 new ones arrive; whatever did not fit
+    // in the buffer is counted.
+    eventually(Duration::from_secs(30), "pushes to resume", || {
+        table.stats().size + metrics.dropped_total("buffer_full") >= 70
+    })
+    .await;
+    pusher.close(Duration::from_secs(5)).await;
+    let size = table.stats().size;
+    let dropped = metrics.dropped_total("buffer_full");
+    assert!(size >= 30, "the buffer's batches and the new ones: {size}");
+    assert_eq!(
+        size + dropped,
+        70,
+        "every transition after the stop either delivered once or counted as dropped"
+    );
+    second.trigger();
+    server.join().await.expect("second server stops");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_grpc_pusher_survives_a_replay_restart() {
+    survives_a_restart(ActorTransport::Grpc).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_shm_pusher_survives_a_replay_restart() {
+    survives_a_restart(ActorTransport::Shm).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_acting_loop_delivers_every_transition_it_assembles() {
+    let shutdown = Shutdown::new();
+    let server =
+        crossroads_replay::start(&replay_config("127.0.0.1:0", None), None, shutdown.clone())
+            .await
+            .expect("replay");
+    let endpoint = format!("http://{}", server.local_addr());
+    let (mut a, mut v) = actor(&actor_config(4, 24), 0);
+    let pusher = Pusher::start(
+        &push_config(ActorTransport::Grpc, &endpoint, "unused", 1024),
+        a.metrics().clone(),
+        &shutdown,
+    )
+    .expect("pusher");
+    let stop = Shutdown::new();
+    let (report, pusher) = tokio::task::spawn_blocking(move || {
+        let report = a.run(&mut v, Some(&pusher), &stop, Some(150));
+        (report, pusher)
+    })
+    .await
+    .expect("acting thread");
+    let report = report.expect("run");
+    assert_eq!(report.steps, 150);
+    assert!(report.transitions > 24, "{report:?}");
+    assert!(report.episodes.episodes() > 0);
+    pusher.close(Duration::from_secs(10)).await;
+    let table = server.table("t").expect("table");
+    assert_eq!(
+        table.stats().size,
+        report.transitions,
+        "full batches and the last partial one"
+    );
+    shutdown.trigger();
+    server.join().await.expect("clean stop");
+}

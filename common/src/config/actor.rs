@@ -1,0 +1,166 @@
+//! `[actor]`: the actor processes' environments, exploration, n-step
+//! assembly and transport, with Ape-X's defaults.
+
+use serde::{Deserialize, Serialize};
+
+/// How an actor sends its batches to the replay server.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ActorTransport {
+    /// gRPC streaming insert to `transport.replay_endpoint`, any host.
+    #[default]
+    Grpc,
+    /// iceoryx2 shared memory (`transport.shm_prefix`), the replay
+    /// server's host only.
+    Shm,
+}
+
+/// An actor process (`crossroads actor`): M environments of one scenario,
+/// one batched forward pass per step, epsilon-greedy exploration from the
+/// Ape-X ladder, n-step transitions pushed in batches.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ActorConfig {
+    /// Scenario the environments run: a built-in name or a TOML file.
+    pub scenario: String,
+    /// Action set: `ttg` (5), `sequential` (12) or `creep` (3). The
+    /// observation follows the paper's pairing (Sequential grid for
+    /// Sequential actions, TTG grid otherwise; occlusion channels when the
+    /// scenario has occluders).
+    pub action_set: String,
+    /// Environments stepped in parallel per process (M). 1 to 4096.
+    pub envs: usize,
+    /// Transitions (decisions, not simulation steps) summed into one
+    /// n-step return. 1 to 64.
+    pub n_step: u32,
+    /// Discount per simulation step; a k-step action is discounted by
+    /// gamma^k. In (0, 1].
+    pub gamma: f64,
+    /// Transitions per pushed batch. 1 to 16384 (and at most the replay
+    /// server's `replay.max_batch_transitions`).
+    pub batch_size: usize,
+    /// This actor's index i among `count`, for the epsilon ladder and its
+    /// seeds. When unset: the `CROSSROADS_ACTOR__INDEX` variable (as every
+    /// key), else the ordinal at the end of the host name (`actor-3`: 3, as
+    /// Kubernetes StatefulSets name pods) modulo `count`, else 0.
+    pub index: Option<u32>,
+    /// Number of actors N in the run. At least 1.
+    pub count: u32,
+    /// Base seed of the run; each actor derives its own from it and its
+    /// index, each environment its episodes' seeds from that.
+    pub seed: u64,
+    /// Ape-X ladder: eps_i = epsilon_base^(1 + epsilon_alpha i / (N - 1)).
+    /// In [0, 1].
+    pub epsilon_base: f64,
+    /// Ape-X ladder exponent (7). At least 0.
+    pub epsilon_alpha: f64,
+    /// Greedy evaluation: no exploration, no transitions pushed; episodes
+    /// are reported to the metrics and the log.
+    pub eval: bool,
+    /// `grpc` or `shm`.
+    pub transport: ActorTransport,
+    /// Batches kept while the replay server is unreachable; beyond it the
+    /// oldest are dropped (and counted). At least 1.
+    pub buffer_batches: usize,
+    /// Batches sent and not yet acknowledged over gRPC. 1 to 1024.
+    pub in_flight: usize,
+}
+
+impl Default for ActorConfig {
+    fn default() -> Self {
+        Self {
+            scenario: "left".to_owned(),
+            action_set: "ttg".to_owned(),
+            envs: 8,
+            n_step: 3,
+            gamma: 0.99,
+            batch_size: 128,
+            index: None,
+            count: 1,
+            seed: 1,
+            epsilon_base: 0.4,
+            epsilon_alpha: 7.0,
+            eval: false,
+            transport: ActorTransport::Grpc,
+            buffer_batches: 256,
+            in_flight: 4,
+        }
+    }
+}
+
+const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
+
+impl ActorConfig {
+    /// Range and relation checks, each with its dotted key.
+    pub fn validate(&self) -> Vec<(String, String)> {
+        let mut problems = Vec::new();
+        let mut check = |ok: bool, key: &str, problem: String| {
+            if !ok {
+                problems.push((format!("actor.{key}"), problem));
+            }
+        };
+        check(
+            !self.scenario.is_empty(),
+            "scenario",
+            "must name a scenario".to_owned(),
+        );
+        check(
+            ACTION_SETS.contains(&self.action_set.as_str()),
+            "action_set",
+            format!(
+                "must be one of {}, got {:?}",
+                ACTION_SETS.join(", "),
+                self.action_set
+            ),
+        );
+        check(
+            (1..=4096).contains(&self.envs),
+            "envs",
+            format!("must be between 1 and 4096, got {}", self.envs),
+        );
+        check(
+            (1..=64).contains(&self.n_step),
+            "n_step",
+            format!("must be between 1 and 64, got {}", self.n_step),
+        );
+        check(
+            self.gamma > 0.0 && self.gamma <= 1.0,
+            "gamma",
+            format!("must be in (0, 1], got {}", self.gamma),
+        );
+        check(
+            (1..=16_384).contains(&self.batch_size),
+            "batch_size",
+            format!("must be between 1 and 16384, got {}", self.batch_size),
+        );
+        check(self.count >= 1, "count", "must be at least 1".to_owned());
+        if let Some(index) = self.index {
+            check(
+                index < self.count,
+                "index",
+                format!("must be below actor.count ({}), got {index}", self.count),
+            );
+        }
+        check(
+            (0.0..=1.0).contains(&self.epsilon_base),
+            "epsilon_base",
+            format!("must be in [0, 1], got {}", self.epsilon_base),
+        );
+        check(
+            self.epsilon_alpha >= 0.0 && self.epsilon_alpha.is_finite(),
+            "epsilon_alpha",
+            format!("must be finite and at least 0, got {}", self.epsilon_alpha),
+        );
+        check(
+            self.buffer_batches >= 1,
+            "buffer_batches",
+            "must be at least 1".to_owned(),
+        );
+        check(
+            (1..=1024).contains(&self.in_flight),
+            "in_flight",
+            format!("must be between 1 and 1024, got {}", self.in_flight),
+        );
+        problems
+    }
+}
