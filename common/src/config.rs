@@ -18,6 +18,10 @@ use figment::value::{Dict, Map};
 use figment::{Figment, Metadata, Profile, Provider, Source};
 use serde::{Deserialize, Serialize};
 
+pub mod learner;
+
+pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
+
 const DEFAULTS: &str = "defaults";
 const COMMAND_LINE: &str = "command line";
 
@@ -37,6 +41,9 @@ pub struct Config {
     /// How roles reach each other: the replay server's address, shared
     /// memory services, timeouts and retries.
     pub transport: TransportConfig,
+    /// The learner: network, optimizer, targets, weight broadcast and
+    /// checkpoints.
+    pub learner: LearnerConfig,
 }
 
 /// Threads of the process.
@@ -395,6 +402,7 @@ impl Config {
                 t.shm_initial_batch_bytes
             ),
         );
+        problems.extend(self.learner.validate());
         problems
     }
 

@@ -1,8 +1,10 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod checkpoints;
 pub mod config;
 pub mod doctor;
 pub mod eval;
+pub mod learner;
 pub mod replay;
 pub mod tune_ttc;
