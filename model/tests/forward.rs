@@ -96,8 +96,14 @@ mod qnetwork {
         let mut out = Vec::new();
         for kind in ObservationLayout::KINDS {
             for actions in ["ttg", "sequential", "creep"] {
-                out.push(NetworkSpec::new(kind, actions, TrunkKind::Mlp, vec![32, 16]).unwrap());
-                out.push(NetworkSpec::new(kind, actions, TrunkKind::Conv, vec![4, 8, 16]).unwrap());
+                out.push(
+                    NetworkSpec::new(kind, actions, TrunkKind::Mlp, vec![32, 16])
+                        .expect("test setup"),
+                );
+                out.push(
+                    NetworkSpec::new(kind, actions, TrunkKind::Conv, vec![4, 8, 16])
+                        .expect("test setup"),
+                );
             }
         }
         out

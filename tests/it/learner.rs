@@ -125,9 +125,11 @@ fn learner_and_checkpoints_commands_work_together() {
         ],
         "replay server listening",
     );
-    let mut config = crossroads_common::LearnerConfig::default();
-    config.observation = "sequential".to_owned();
-    config.hidden = vec![32];
+    let config = crossroads_common::LearnerConfig {
+        observation: "sequential".to_owned(),
+        hidden: vec![32],
+        ..Default::default()
+    };
     fill(&replay_addr, &config);
 
     let ckpts = dir.path().join("ckpts");

@@ -12,7 +12,7 @@ use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
 use tch::Tensor;
 
 fn spec() -> NetworkSpec {
-    NetworkSpec::new("sequential", "ttg", TrunkKind::Mlp, vec![32, 16]).unwrap()
+    NetworkSpec::new("sequential", "ttg", TrunkKind::Mlp, vec![32, 16]).expect("test setup")
 }
 
 fn config(optimizer: OptimizerConfig) -> TrainerConfig {
@@ -41,13 +41,14 @@ fn batches(n: usize) -> Vec<TrainingBatch> {
                 (0..b.len() as u64).map(|k| k + 100 * i as u64).collect(),
                 &spec(),
             )
-            .unwrap()
+            .expect("test setup")
         })
         .collect()
 }
 
 fn bits(net: &QNetwork, x: &Tensor) -> Vec<u32> {
-    let v: Vec<f32> = Vec::try_from(net.q_values(x).unwrap().flatten(0, -1)).unwrap();
+    let v: Vec<f32> =
+        Vec::try_from(net.q_values(x).expect("test setup").flatten(0, -1)).expect("test setup");
     v.iter().map(|f| f.to_bits()).collect()
 }
 
@@ -57,7 +58,7 @@ fn write(
     version: u64,
     eval: &BTreeMap<String, f64>,
 ) -> String {
-    let state = t.state(version).unwrap();
+    let state = t.state(version).expect("test setup");
     store
         .write(&NewCheckpoint {
             state: &state,
@@ -69,7 +70,7 @@ fn write(
             eval_weights_version: version,
             config: "# test",
         })
-        .unwrap()
+        .expect("test setup")
         .manifest
         .id
 }

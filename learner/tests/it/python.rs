@@ -60,9 +60,11 @@ fn learner_weights_load_in_python_safetensors() {
         return;
     }
 
-    let mut config = crossroads_common::LearnerConfig::default();
-    config.trunk = crossroads_common::config::Trunk::Conv;
-    config.hidden = vec![8, 16, 64];
+    let config = crossroads_common::LearnerConfig {
+        trunk: crossroads_common::config::Trunk::Conv,
+        hidden: vec![8, 16, 64],
+        ..Default::default()
+    };
     let trainer = Trainer::new(TrainerConfig::from_config(&config).unwrap()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let store = CheckpointStore::open(dir.path(), 1, "success_rate").unwrap();

@@ -28,12 +28,16 @@ async fn replay_with_data(config: &Config) -> Replay {
     let shutdown = Shutdown::new();
     let server = crossroads_replay::start(&c, None, shutdown.clone())
         .await
-        .unwrap();
+        .expect("test setup");
     let mut transport = c.transport.clone();
     transport.replay_endpoint = format!("http://{}", server.local_addr());
-    let client = ReplayClient::new(&transport, &c.replay.table).unwrap();
-    let spec = TrainerConfig::from_config(&c.learner).unwrap().spec;
-    fill_replay(&client, &spec, 2_000).await.unwrap();
+    let client = ReplayClient::new(&transport, &c.replay.table).expect("test setup");
+    let spec = TrainerConfig::from_config(&c.learner)
+        .expect("test setup")
+        .spec;
+    fill_replay(&client, &spec, 2_000)
+        .await
+        .expect("test setup");
     Replay { shutdown, server }
 }
 
@@ -61,7 +65,7 @@ async fn start_learner(
     c.transport.replay_endpoint = format!("http://{}", replay.server.local_addr());
     crossroads_learner::start(&c, registry, Shutdown::new())
         .await
-        .unwrap()
+        .expect("test setup")
 }
 
 fn client(learner: &RunningLearner, token: Option<&str>) -> LearnerClient {
@@ -70,12 +74,12 @@ fn client(learner: &RunningLearner, token: Option<&str>) -> LearnerClient {
         token.map(str::to_owned),
         Duration::from_secs(30),
     )
-    .unwrap()
+    .expect("test setup")
 }
 
 async fn wait_for_step(c: &LearnerClient, step: u64) {
     for _ in 0..600 {
-        if c.status().await.unwrap().update_step >= step {
+        if c.status().await.expect("test setup").update_step >= step {
             return;
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
@@ -272,8 +276,10 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
 #[test]
 fn weights_reach_a_late_shared_memory_subscriber() {
     use crossroads_learner::shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
-    let mut transport = crossroads_common::TransportConfig::default();
-    transport.shm_prefix = format!("crossroads-test-{}-weights", std::process::id());
+    let transport = crossroads_common::TransportConfig {
+        shm_prefix: format!("crossroads-test-{}-weights", std::process::id()),
+        ..Default::default()
+    };
     let mut publisher = ShmWeightsPublisher::new(&transport, 1024).unwrap();
     publisher.publish(1, 10, 123, &[1, 2, 3]).unwrap();
     publisher.publish(2, 20, 456, &[4, 5, 6, 7]).unwrap();

@@ -11,7 +11,7 @@ use tch::{Kind, Tensor};
 use crate::{toy_batch, toy_spec};
 
 fn values(t: &Tensor) -> Vec<f32> {
-    Vec::try_from(t.flatten(0, -1).to_kind(Kind::Float)).unwrap()
+    Vec::try_from(t.flatten(0, -1).to_kind(Kind::Float)).expect("test setup")
 }
 
 fn close(got: &[f32], want: &[f32], tol: f32) {
@@ -164,7 +164,8 @@ impl Chain {
             });
         }
         let n = b.len();
-        TrainingBatch::from_batch(&b, &vec![1.0; n], (0..n as u64).collect(), spec).unwrap()
+        TrainingBatch::from_batch(&b, &vec![1.0; n], (0..n as u64).collect(), spec)
+            .expect("test setup")
     }
 }
 
@@ -180,7 +181,7 @@ fn trainer(spec: NetworkSpec, optimizer: OptimizerConfig, target: TargetUpdate) 
         target_tau: 0.05,
         priority_eps: 1e-6,
     })
-    .unwrap()
+    .expect("test setup")
 }
 
 #[test]
