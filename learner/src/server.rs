@@ -150,9 +150,19 @@ pub async fn start(
     };
     let thread_shared = shared.clone();
     let thread_stop = stop.clone();
+    let threads = config.runtime.compute_threads;
     std::thread::Builder::new()
         .name("learner".to_owned())
         .spawn(move || {
+            // libtorch's OpenMP thread count is per calling thread; set it
+            // on the thread that trains.
+            if threads > 0 {
+                tch::set_num_threads(threads as i32);
+            }
+            tracing::debug!(
+                torch_threads = tch::get_num_threads(),
+                "training thread started"
+            );
             let learner = match Learner::new(thread_shared) {
                 Ok(l) => {
                     let _ = ready_tx.send(Ok(()));
