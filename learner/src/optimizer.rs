@@ -174,12 +174,16 @@ impl Optimizer {
                     continue;
                 }
                 match config {
+                    // In place where tch allows, and few passes over each
+                    // tensor: v += (1 - decay)(g^2 - v) is decay v +
+                    // (1 - decay) g^2, and -lr folds into the denominator.
                     OptimizerConfig::Rmsprop { lr, decay, eps } => {
                         let sq = &mut p.slots[0];
-                        let _ = sq.g_mul_scalar_(decay);
-                        let _ = sq.addcmul_(&(&g * (1.0 - decay)), &g);
-                        let denom = sq.sqrt() + eps;
-                        let _ = p.value.addcdiv_(&(&g * -lr), &denom);
+                        let _ = sq.lerp_(&g.square(), 1.0 - decay);
+                        let mut denom = sq.sqrt();
+                        let _ = denom.g_add_scalar_(eps);
+                        let _ = denom.g_mul_scalar_(-1.0 / lr);
+                        let _ = p.value.addcdiv_(&g, &denom);
                     }
                     OptimizerConfig::Adam {
                         lr,
@@ -189,14 +193,16 @@ impl Optimizer {
                     } => {
                         let (m, v) = p.slots.split_at_mut(1);
                         let (m, v) = (&mut m[0], &mut v[0]);
-                        let _ = m.g_mul_scalar_(beta1);
-                        let _ = m.g_add_(&(&g * (1.0 - beta1)));
-                        let _ = v.g_mul_scalar_(beta2);
-                        let _ = v.addcmul_(&(&g * (1.0 - beta2)), &g);
+                        let _ = m.lerp_(&g, 1.0 - beta1);
+                        let _ = v.lerp_(&g.square(), 1.0 - beta2);
                         let bias1 = 1.0 - beta1.powi(t);
                         let bias2 = 1.0 - beta2.powi(t);
-                        let denom = v.sqrt() / bias2.sqrt() + eps;
-                        let _ = p.value.addcdiv_(&(&*m * (-lr / bias1)), &denom);
+                        // p -= lr / bias1 * m / (sqrt(v / bias2) + eps)
+                        let mut denom = v.sqrt();
+                        let _ = denom.g_mul_scalar_(1.0 / bias2.sqrt());
+                        let _ = denom.g_add_scalar_(eps);
+                        let _ = denom.g_mul_scalar_(-bias1 / lr);
+                        let _ = p.value.addcdiv_(m, &denom);
                     }
                 }
             }
