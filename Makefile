@@ -6,13 +6,17 @@
 CARGO ?= cargo
 RUN_ARGS ?=
 
-.PHONY: all setup build run test lint fmt clean-libtorch
+.PHONY: all setup pydeps build run test lint fmt clean-libtorch bench-learner
 
 all: build
 
 # Assembles CPU libtorch into .libtorch (skipped when already there).
 setup:
 	@scripts/setup-libtorch.sh
+
+# Python for the tests: .venv with safetensors (scripts/requirements-test.txt).
+pydeps:
+	@scripts/setup-python.sh
 
 build: setup
 	$(CARGO) build --release --bin crossroads
@@ -21,9 +25,9 @@ build: setup
 run: build
 	./target/release/crossroads doctor $(RUN_ARGS)
 
-test: setup
+test: setup pydeps
 	$(CARGO) fmt --all -- --check
-	$(CARGO) test --workspace --all-targets --no-fail-fast
+	CROSSROADS_REQUIRE_PYTHON=1 $(CARGO) test --workspace --all-targets --no-fail-fast
 	$(CARGO) test --workspace --doc
 
 lint: setup
@@ -32,6 +36,11 @@ lint: setup
 
 fmt:
 	$(CARGO) fmt --all
+
+# Learner updates/s against the same network in PyTorch (installs torch).
+bench-learner: build
+	@scripts/setup-python.sh --bench
+	./target/release/crossroads bench learner
 
 clean-libtorch:
 	rm -rf .libtorch

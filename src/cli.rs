@@ -78,6 +78,126 @@ pub enum Command {
     Replay(ReplayArgs),
     /// Measure throughput and memory on this machine and print the figures.
     Bench(BenchArgs),
+    /// Run the learner: dueling double DQN trained from the replay server.
+    ///
+    /// Samples batches over gRPC (prefetched in the background), trains,
+    /// sends priority updates, publishes versioned weights (iceoryx2 on this
+    /// host, a gRPC stream for any host) and keeps checkpoints. Configured
+    /// by the [learner] and [transport] sections, the environment and the
+    /// flags below; stops on SIGINT/SIGTERM after a last checkpoint.
+    Learner(LearnerArgs),
+    /// Manage the learner's checkpoints over its gRPC API: list, pull,
+    /// save, restore, delete.
+    Checkpoints(CheckpointsArgs),
+}
+
+/// `crossroads learner`. Each flag overrides the `[learner]` (or
+/// `[transport]`) key it names.
+#[derive(Debug, Clone, Args)]
+pub struct LearnerArgs {
+    /// gRPC address to serve on (learner.listen); port 0 picks a free port.
+    #[arg(long, value_name = "ADDR")]
+    pub listen: Option<std::net::SocketAddr>,
+    /// The replay server to sample from (transport.replay_endpoint).
+    #[arg(long, value_name = "URL")]
+    pub replay: Option<String>,
+    /// Directory for checkpoints, resumed from at start
+    /// (learner.checkpoint_dir).
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Stop after this many updates (learner.max_updates).
+    #[arg(long, value_name = "N")]
+    pub max_updates: Option<u64>,
+    /// Start fresh even if checkpoints exist (learner.resume = false).
+    #[arg(long)]
+    pub no_resume: bool,
+    /// Do not publish weights over iceoryx2 shared memory
+    /// (learner.shm_publish = false).
+    #[arg(long)]
+    pub no_shm: bool,
+}
+
+impl LearnerArgs {
+    /// Layers these flags over `loader`.
+    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
+        if let Some(v) = self.listen {
+            loader = loader.flag("learner.listen", v.to_string());
+        }
+        if let Some(v) = &self.replay {
+            loader = loader.flag("transport.replay_endpoint", v);
+        }
+        if let Some(v) = &self.checkpoint_dir {
+            loader = loader.flag("learner.checkpoint_dir", v);
+        }
+        if let Some(v) = self.max_updates {
+            loader = loader.flag("learner.max_updates", v);
+        }
+        if self.no_resume {
+            loader = loader.flag("learner.resume", false);
+        }
+        if self.no_shm {
+            loader = loader.flag("learner.shm_publish", false);
+        }
+        loader
+    }
+}
+
+/// `crossroads checkpoints`.
+#[derive(Debug, Args)]
+pub struct CheckpointsArgs {
+    /// The learner's gRPC URL.
+    #[arg(
+        long,
+        global = true,
+        env = "CROSSROADS_LEARNER_URL",
+        default_value = "http://127.0.0.1:50052",
+        value_name = "URL"
+    )]
+    pub learner: String,
+    /// Bearer token for save, restore and delete (the learner's
+    /// learner.api_token).
+    #[arg(
+        long,
+        global = true,
+        env = "CROSSROADS_LEARNER_TOKEN",
+        hide_env_values = true,
+        value_name = "TOKEN"
+    )]
+    pub token: Option<String>,
+    /// Seconds to wait for each answer.
+    #[arg(long, global = true, default_value_t = 60)]
+    pub timeout: u64,
+    /// Print JSON instead of text.
+    #[arg(long, global = true)]
+    pub json: bool,
+    #[command(subcommand)]
+    pub action: CheckpointsAction,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CheckpointsAction {
+    /// List stored checkpoints, newest first.
+    List,
+    /// Download a checkpoint's files into OUT/<id>/.
+    Pull {
+        /// Checkpoint id, e.g. ckpt-000000012000.
+        id: String,
+        /// Folder to write into.
+        #[arg(long, short = 'o', default_value = ".")]
+        out: PathBuf,
+    },
+    /// Write a checkpoint now.
+    Save,
+    /// Load a checkpoint into the running learner and continue from it.
+    Restore {
+        /// Checkpoint id.
+        id: String,
+    },
+    /// Remove a checkpoint.
+    Delete {
+        /// Checkpoint id.
+        id: String,
+    },
 }
 
 /// A policy driving an action set on a scenario (`eval`, `render`).
@@ -281,6 +401,37 @@ pub enum BenchTarget {
         /// Timed rounds; the median is reported.
         #[arg(long, default_value_t = 11)]
         rounds: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Learner: updates/s of the default network at each batch size on
+    /// in-memory batches, then fed by a replay server over loopback gRPC
+    /// (with the fraction of time spent waiting for samples), and the same
+    /// network and optimizer in PyTorch for comparison.
+    Learner {
+        /// Batch sizes, comma-separated.
+        #[arg(long, default_value = "64,256", value_delimiter = ',')]
+        batch: Vec<u32>,
+        /// libtorch (and PyTorch) intra-op threads.
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+        /// Timed rounds per measurement; the median is reported.
+        #[arg(long, default_value_t = 5)]
+        rounds: usize,
+        /// Seconds per round.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+        /// Updates of the gRPC-fed run per batch size.
+        #[arg(long, default_value_t = 300)]
+        fed_updates: u64,
+        /// Python with torch for the comparison [default: $CROSSROADS_PYTHON,
+        /// then .venv/bin/python3, then python3].
+        #[arg(long)]
+        python: Option<PathBuf>,
+        /// Skip the PyTorch comparison.
+        #[arg(long)]
+        no_pytorch: bool,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,

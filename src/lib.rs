@@ -19,6 +19,7 @@ use cli::{Cli, Command};
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let loader = match &cli.command {
         Command::Replay(args) => args.apply(cli.global.loader()),
+        Command::Learner(args) => args.apply(cli.global.loader()),
         _ => cli.global.loader(),
     };
     let config = loader.load().context("loading configuration")?;
@@ -36,6 +37,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::TuneTtc(args) => commands::tune_ttc::run(&args),
         Command::Render(args) => commands::render::run(&args),
         Command::Replay(_) => commands::replay::run(&config),
-        Command::Bench(args) => commands::bench::run(&args),
+        Command::Bench(args) => commands::bench::run(&config, &args),
+        Command::Learner(_) => commands::learner::run(&config),
+        Command::Checkpoints(args) => commands::checkpoints::run(&args),
     }
 }

@@ -19,8 +19,10 @@ use figment::{Figment, Metadata, Profile, Provider, Source};
 use serde::{Deserialize, Serialize};
 
 pub mod actor;
+pub mod learner;
 
 pub use actor::{ActorConfig, ActorTransport};
+pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
 
 const DEFAULTS: &str = "defaults";
 const COMMAND_LINE: &str = "command line";
@@ -44,6 +46,9 @@ pub struct Config {
     /// Actor processes: environments, exploration, n-step assembly and
     /// transport of transitions.
     pub actor: ActorConfig,
+    /// The learner: network, optimizer, targets, weight broadcast and
+    /// checkpoints.
+    pub learner: LearnerConfig,
 }
 
 /// Threads of the process.
@@ -403,6 +408,7 @@ impl Config {
             ),
         );
         problems.extend(self.actor.validate());
+        problems.extend(self.learner.validate());
         problems
     }
 

@@ -37,8 +37,8 @@ pub use batch::{
 };
 pub use codec::ObservationEncoding;
 pub use config::{
-    ActorConfig, ActorTransport, Config, ConfigError, ConfigLoader, ConfigProblem, LogFormat,
-    ReplayConfig, TransportConfig, WeightNormalization,
+    ActorConfig, ActorTransport, Config, ConfigError, ConfigLoader, ConfigProblem, LearnerConfig,
+    LogFormat, ReplayConfig, TransportConfig, WeightNormalization,
 };
 pub use metrics::MetricsServer;
 pub use retry::Backoff;

@@ -1,4 +1,48 @@
-//! The learner: dueling double DQN training, weight broadcast, checkpoints.
-//! Never steps a simulator.
+//! The learner: dueling double DQN trained from the replay server, weight
+//! broadcast to actors, checkpoints and their gRPC API. Never steps a
+//! simulator.
 //!
-//! Its content lands with issue 5; until then the crate is empty.
+//! Data flow: [`sampler::spawn_prefetch`] samples batches from the replay
+//! server over gRPC in the background and decodes them into
+//! [`TrainingBatch`]es; the training thread ([`training::Learner`]) takes
+//! them and runs [`Trainer::update`] (double-DQN n-step targets under
+//! `no_grad`, importance-weighted Huber loss, [`Optimizer`] step with
+//! gradient clipping, target-network update), hands the new priorities to
+//! [`sampler::spawn_priority_sender`], and on its schedules publishes the
+//! weights (a monotonic version; [`broadcast::WeightsHub`] for the gRPC
+//! stream, [`shm::ShmWeightsPublisher`] for actors on this host) and writes
+//! checkpoints ([`CheckpointStore`]: safetensors weights, target network
+//! and optimizer state plus a JSON manifest, written atomically). The tonic
+//! service ([`service::LearnerService`]) serves weights, checkpoints and
+//! status; [`LearnerClient`] is its client. [`start`] / [`run`] put it all
+//! together under one shutdown signal. [`bench`](mod@bench) measures
+//! updates per second and the time spent waiting for samples.
+//!
+//! The whole configuration is the `[learner]` section
+//! ([`crossroads_common::LearnerConfig`]).
+
+pub mod batch;
+pub mod bench;
+pub mod broadcast;
+pub mod checkpoint;
+pub mod client;
+pub mod convert;
+mod error;
+pub mod metrics;
+pub mod optimizer;
+pub mod sampler;
+pub mod server;
+pub mod service;
+pub mod shm;
+pub mod targets;
+pub mod trainer;
+pub mod training;
+
+pub use batch::TrainingBatch;
+pub use checkpoint::{CheckpointStore, StoreError};
+pub use client::{LearnerClient, LearnerClientError};
+pub use error::LearnerError;
+pub use metrics::LearnerMetrics;
+pub use optimizer::{Optimizer, OptimizerConfig};
+pub use server::{RunningLearner, run, start};
+pub use trainer::{Trainer, TrainerConfig, UpdateStats};

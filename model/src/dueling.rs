@@ -2,6 +2,8 @@
 
 use tch::{Tensor, nn};
 
+use crate::ModelError;
+
 /// Shape of a [`DuelingMlp`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MlpSpec {
@@ -11,25 +13,6 @@ pub struct MlpSpec {
     pub hidden: Vec<i64>,
     /// Number of discrete actions.
     pub num_actions: i64,
-}
-
-/// Why a network could not be built or run.
-#[derive(Debug, thiserror::Error)]
-pub enum ModelError {
-    /// A dimension is zero or negative.
-    #[error("invalid network spec: {0}")]
-    Spec(String),
-    /// The input does not have the expected shape.
-    #[error("expected input of shape [batch, {expected}], got {got:?}")]
-    Shape {
-        /// Features the network expects.
-        expected: i64,
-        /// Shape it got.
-        got: Vec<i64>,
-    },
-    /// libtorch refused.
-    #[error("libtorch: {0}")]
-    Torch(#[from] tch::TchError),
 }
 
 /// A dueling Q-network: trunk, then value and advantage heads.

@@ -1,12 +1,26 @@
 //! The dueling Q-network, in tch, shared by actors (batched inference) and
-//! the learner (training).
+//! the learner (training), and its weights format.
 //!
-//! [`DuelingMlp`] maps a batch of flat observations to one Q-value per
-//! action through a trunk of fully connected layers and two heads, value
-//! V(s) and advantage A(s, a), combined as Q = V + A - mean(A) (Wang et
-//! al. 2016). [`MlpSpec`] says its shape. Conv trunks, the weights format
-//! and the version number arrive with the learner (issue 5).
+//! A [`NetworkSpec`] says what a network is: the [`ObservationLayout`] it
+//! reads (the simulator's channel-major grid plus dense ego features), the
+//! action set it scores and its trunk ([`TrunkKind::Mlp`] or
+//! [`TrunkKind::Conv`]). [`QNetwork`] builds it with value V(s) and
+//! advantage A(s, a) heads combined as Q = V + A - mean(A) (Wang et al.
+//! 2016); [`QNetwork::infer`] is the batched inference actors call, and
+//! [`QNetwork::q_values`] the differentiable forward pass the learner trains.
+//! [`weights`] is the on-disk and on-wire format: safetensors with the spec
+//! and a version number in its metadata, readable by Python's safetensors
+//! and PyTorch. [`DuelingMlp`] is the bare MLP variant over a caller's
+//! `VarStore`, kept for `crossroads doctor`.
 
 mod dueling;
+mod error;
+mod network;
+pub mod spec;
+pub mod weights;
 
-pub use dueling::{DuelingMlp, MlpSpec, ModelError};
+pub use dueling::{DuelingMlp, MlpSpec};
+pub use error::ModelError;
+pub use network::{QBatch, QNetwork};
+pub use spec::{EGO_FEATURES, NetworkSpec, ObservationLayout, TrunkKind, num_actions_of};
+pub use weights::WeightsMeta;

@@ -80,3 +80,217 @@ fn zero_width_spec_is_rejected() {
     };
     assert!(DuelingMlp::new(&vs.root(), spec).is_err());
 }
+
+mod qnetwork {
+    use crossroads_model::{
+        ModelError, NetworkSpec, ObservationLayout, QNetwork, TrunkKind, weights,
+    };
+    use tch::{Kind, Tensor};
+
+    fn obs(spec: &NetworkSpec, batch: i64, seed: i64) -> Tensor {
+        tch::manual_seed(seed);
+        Tensor::rand([batch, spec.input_len()], (Kind::Float, tch::Device::Cpu))
+    }
+
+    fn specs() -> Vec<NetworkSpec> {
+        let mut out = Vec::new();
+        for kind in ObservationLayout::KINDS {
+            for actions in ["ttg", "sequential", "creep"] {
+                out.push(
+                    NetworkSpec::new(kind, actions, TrunkKind::Mlp, vec![32, 16])
+                        .expect("test setup"),
+                );
+                out.push(
+                    NetworkSpec::new(kind, actions, TrunkKind::Conv, vec![4, 8, 16])
+                        .expect("test setup"),
+                );
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn every_observation_kind_and_action_set_has_a_network_of_each_trunk() {
+        for spec in specs() {
+            let net = QNetwork::new(spec.clone(), 3).unwrap();
+            let q = net.q_values(&obs(&spec, 5, 1)).unwrap();
+            assert_eq!(q.size(), vec![5, spec.num_actions], "{spec:?}");
+            let flat: Vec<f32> = Vec::try_from(obs(&spec, 2, 2).flatten(0, -1)).unwrap();
+            let batch = net.infer(&flat, 2).unwrap();
+            assert_eq!(batch.len(), 2);
+            assert_eq!(batch.row(1).len(), spec.num_actions as usize);
+            assert!(
+                batch
+                    .greedy()
+                    .iter()
+                    .all(|&a| (a as i64) < spec.num_actions)
+            );
+        }
+    }
+
+    #[test]
+    fn dueling_identity_holds_for_both_trunks() {
+        // Q = V + A - mean_a A, so mean_a Q = V and Q - mean_a Q = A - mean_a A.
+        for trunk in [TrunkKind::Mlp, TrunkKind::Conv] {
+            let hidden = if trunk == TrunkKind::Mlp {
+                vec![64]
+            } else {
+                vec![8, 8, 32]
+            };
+            let spec = NetworkSpec::new("sequential", "sequential", trunk, hidden).unwrap();
+            let net = QNetwork::new(spec.clone(), 9).unwrap();
+            let x = obs(&spec, 7, 4);
+            let q = net.q_values(&x).unwrap();
+            let (v, a) = net.streams(&x).unwrap();
+            assert_eq!(v.size(), vec![7, 1]);
+            let q_mean = q.mean_dim(1, true, Kind::Float);
+            let a_centered = &a - a.mean_dim(1, true, Kind::Float);
+            let err_v = (&q_mean - &v).abs().max().double_value(&[]);
+            let err_a = (&q - &q_mean - a_centered).abs().max().double_value(&[]);
+            assert!(err_v < 1e-5, "{trunk:?}: mean Q differs from V by {err_v}");
+            assert!(
+                err_a < 1e-5,
+                "{trunk:?}: centred Q differs from centred A by {err_a}"
+            );
+            // A constant added to every advantage leaves Q unchanged.
+            let (_, a2) = net.streams(&x).unwrap();
+            let q_shifted = &v + (&a2 + 3.5) - (&a2 + 3.5).mean_dim(1, true, Kind::Float);
+            assert!((q_shifted - &q).abs().max().double_value(&[]) < 1e-5);
+        }
+    }
+
+    #[test]
+    fn safetensors_round_trip_gives_bit_identical_q_values() {
+        for spec in [
+            NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![64, 32]).unwrap(),
+            NetworkSpec::new("ttg-occlusion", "creep", TrunkKind::Conv, vec![8, 16, 32]).unwrap(),
+        ] {
+            let net = QNetwork::new(spec.clone(), 5).unwrap();
+            let bytes = net.to_safetensors(42).unwrap();
+            let (back, version) = QNetwork::from_safetensors(&bytes).unwrap();
+            assert_eq!(version, 42);
+            assert_eq!(back.spec(), &spec);
+            let x = obs(&spec, 16, 8);
+            let a: Vec<f32> = Vec::try_from(net.q_values(&x).unwrap().flatten(0, -1)).unwrap();
+            let b: Vec<f32> = Vec::try_from(back.q_values(&x).unwrap().flatten(0, -1)).unwrap();
+            let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&a), bits(&b));
+        }
+    }
+
+    #[test]
+    fn weights_carry_names_shapes_spec_and_version() {
+        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![256, 256]).unwrap();
+        let net = QNetwork::new(spec.clone(), 1).unwrap();
+        let (meta, tensors) = weights::decode(&net.to_safetensors(7).unwrap()).unwrap();
+        assert_eq!(meta["format"], weights::FORMAT);
+        assert_eq!(meta["weights_version"], "7");
+        let mut names: Vec<(String, Vec<i64>)> =
+            tensors.iter().map(|(n, t)| (n.clone(), t.size())).collect();
+        names.sort();
+        assert_eq!(
+            names,
+            vec![
+                ("advantage.bias".to_owned(), vec![5]),
+                ("advantage.weight".to_owned(), vec![5, 256]),
+                ("trunk.0.bias".to_owned(), vec![256]),
+                ("trunk.0.weight".to_owned(), vec![256, 3 * 18 * 26 + 4]),
+                ("trunk.1.bias".to_owned(), vec![256]),
+                ("trunk.1.weight".to_owned(), vec![256, 256]),
+                ("value.bias".to_owned(), vec![1]),
+                ("value.weight".to_owned(), vec![1, 256]),
+            ]
+        );
+    }
+
+    #[test]
+    fn bad_weights_are_refused_and_leave_the_network_unchanged() {
+        let spec = NetworkSpec::new("sequential", "sequential", TrunkKind::Mlp, vec![16]).unwrap();
+        let mut net = QNetwork::new(spec.clone(), 1).unwrap();
+        let x = obs(&spec, 3, 3);
+        let before: Vec<f32> = Vec::try_from(net.q_values(&x).unwrap().flatten(0, -1)).unwrap();
+
+        let other = NetworkSpec::new("sequential", "creep", TrunkKind::Mlp, vec![16]).unwrap();
+        let bytes = QNetwork::new(other, 1).unwrap().to_safetensors(1).unwrap();
+        let err = net.load_safetensors(&bytes).unwrap_err();
+        assert!(matches!(err, ModelError::SpecMismatch { .. }), "{err}");
+
+        let err = net.load_safetensors(b"not a safetensors file").unwrap_err();
+        assert!(err.to_string().contains("invalid weights file"), "{err}");
+
+        // NaN in one tensor.
+        let mut tensors = net.named_variables();
+        let (meta, _) = weights::decode(&net.to_safetensors(2).unwrap()).unwrap();
+        tensors[0].1 = tensors[0].1.full_like(f64::NAN);
+        let nan = weights::encode(&tensors, &meta).unwrap();
+        let err = net.load_safetensors(&nan).unwrap_err();
+        assert!(err.to_string().contains("NaN"), "{err}");
+
+        // A missing tensor.
+        let short = weights::encode(&net.named_variables()[1..], &meta).unwrap();
+        let err = net.load_safetensors(&short).unwrap_err();
+        assert!(err.to_string().contains("missing"), "{err}");
+
+        let after: Vec<f32> = Vec::try_from(net.q_values(&x).unwrap().flatten(0, -1)).unwrap();
+        assert_eq!(before, after);
+    }
+
+    #[test]
+    fn inference_rejects_wrong_lengths_and_non_finite_input() {
+        let spec = NetworkSpec::new("sequential", "ttg", TrunkKind::Mlp, vec![8]).unwrap();
+        let net = QNetwork::new(spec.clone(), 1).unwrap();
+        let n = spec.input_len() as usize;
+        let err = net.infer(&vec![0.0; n * 2 - 1], 2).unwrap_err();
+        assert!(matches!(err, ModelError::Shape { .. }), "{err}");
+        let mut x = vec![0.0; n * 2];
+        x[n + 3] = f32::NAN;
+        let err = net.infer(&x, 2).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "observation 1 value 3 holds NaN or infinite values"
+        );
+        let err = net
+            .q_values(&Tensor::zeros(
+                [2, spec.input_len()],
+                (Kind::Double, tch::Device::Cpu),
+            ))
+            .unwrap_err();
+        assert!(matches!(err, ModelError::Kind(Kind::Double)), "{err}");
+    }
+
+    #[test]
+    fn invalid_specs_name_the_problem() {
+        let err = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![16]).unwrap_err();
+        assert!(err.to_string().contains("conv trunk"), "{err}");
+        let err = NetworkSpec::new("birdseye", "ttg", TrunkKind::Mlp, vec![16]).unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("unknown observation kind \"birdseye\""),
+            "{err}"
+        );
+        let err = NetworkSpec::new("ttg", "left", TrunkKind::Mlp, vec![16]).unwrap_err();
+        assert!(
+            err.to_string().contains("unknown action set \"left\""),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn soft_and_hard_updates_move_towards_the_source() {
+        let spec = NetworkSpec::new("sequential", "creep", TrunkKind::Mlp, vec![8]).unwrap();
+        let online = QNetwork::new(spec.clone(), 1).unwrap();
+        let mut target = QNetwork::new(spec.clone(), 2).unwrap();
+        let x = obs(&spec, 4, 1);
+        let dist = |a: &QNetwork, b: &QNetwork| {
+            (a.q_values(&x).unwrap() - b.q_values(&x).unwrap())
+                .abs()
+                .sum(Kind::Float)
+                .double_value(&[])
+        };
+        let d0 = dist(&online, &target);
+        target.soft_update_from(&online, 0.5).unwrap();
+        assert!(dist(&online, &target) < d0);
+        target.copy_from(&online).unwrap();
+        assert_eq!(dist(&online, &target), 0.0);
+    }
+}

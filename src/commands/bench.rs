@@ -3,13 +3,38 @@
 use std::process::ExitCode;
 use std::time::Duration;
 
+use crossroads_common::Config;
 use crossroads_sim::bench_builtin;
 
 use crate::cli::{BenchArgs, BenchTarget};
 
+mod learner;
+
 /// Runs the chosen measurement and prints its figures.
-pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
+pub fn run(config: &Config, args: &BenchArgs) -> anyhow::Result<ExitCode> {
     match &args.target {
+        BenchTarget::Learner {
+            batch,
+            threads,
+            rounds,
+            seconds,
+            fed_updates,
+            python,
+            no_pytorch,
+            json,
+        } => learner::run(
+            config,
+            &learner::Options {
+                batches: batch.clone(),
+                threads: *threads,
+                rounds: *rounds,
+                seconds: *seconds,
+                fed_updates: *fed_updates,
+                python: python.clone(),
+                pytorch: !*no_pytorch,
+                json: *json,
+            },
+        ),
         BenchTarget::Sim { seconds, json } => sim(*seconds, *json),
         BenchTarget::Replay {
             capacity,

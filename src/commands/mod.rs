@@ -1,9 +1,11 @@
 //! One module per subcommand.
 
 pub mod bench;
+pub mod checkpoints;
 pub mod config;
 pub mod doctor;
 pub mod eval;
+pub mod learner;
 pub mod render;
 pub mod replay;
 pub mod tune_ttc;

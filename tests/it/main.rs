@@ -2,6 +2,7 @@
 //! one test binary.
 
 mod cli;
+mod learner;
 mod replay;
 mod setup_libtorch;
 mod sim_commands;

@@ -1,0 +1,309 @@
+//! `[learner]`: the learner's network, optimizer, targets, weight broadcast
+//! and checkpoints, with the paper's (and DQN's) defaults.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+/// Which optimizer trains the online network.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OptimizerKind {
+    /// RMSProp as in the paper (Mnih et al. 2013/2015): uncentered, no
+    /// momentum.
+    #[default]
+    Rmsprop,
+    /// Adam (Kingma and Ba), with bias correction.
+    Adam,
+}
+
+/// How the target network follows the online one.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TargetUpdate {
+    /// Copied every `target_period` updates (DQN).
+    #[default]
+    Period,
+    /// Moved a fraction `target_tau` towards the online network after every
+    /// update (Polyak averaging).
+    Soft,
+}
+
+/// The trunk of the Q-network.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Trunk {
+    /// Fully connected layers over the flat observation.
+    #[default]
+    Mlp,
+    /// A small conv net over the grid, then one fully connected layer.
+    Conv,
+}
+
+/// The learner (`crossroads learner`): dueling double DQN with n-step
+/// returns, trained from the replay server, publishing weights and keeping
+/// checkpoints.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LearnerConfig {
+    /// gRPC address of the learner service (weights, checkpoints, status);
+    /// port 0 picks a free port.
+    pub listen: SocketAddr,
+    /// Scenario the run trains on; recorded in checkpoints and status.
+    pub scenario: String,
+    /// Observation the network reads: `ttg`, `ttg-occlusion`, `sequential`
+    /// or `sequential-occlusion`.
+    pub observation: String,
+    /// Action set the network scores: `ttg` (5), `sequential` (12) or
+    /// `creep` (3).
+    pub action_set: String,
+    /// Trunk of the dueling network: `mlp` or `conv`.
+    pub trunk: Trunk,
+    /// For `mlp` the hidden widths; for `conv` the channels of each 3x3
+    /// convolution, then the width of the fully connected layer.
+    pub hidden: Vec<u32>,
+    /// Seed of the network's initial weights.
+    pub seed: u64,
+    /// Transitions per update. 1 to 65536.
+    pub batch_size: u32,
+    /// `rmsprop` (the paper) or `adam`.
+    pub optimizer: OptimizerKind,
+    /// Step size. Above 0.
+    pub learning_rate: f64,
+    /// RMSProp: decay of the squared-gradient average (DQN: 0.95). In
+    /// [0, 1).
+    pub rmsprop_decay: f64,
+    /// RMSProp: added to the root of the average (DQN: 0.01). Above 0.
+    pub rmsprop_eps: f64,
+    /// Adam: decay of the first moment. In [0, 1).
+    pub adam_beta1: f64,
+    /// Adam: decay of the second moment. In [0, 1).
+    pub adam_beta2: f64,
+    /// Adam: added to the root of the second moment. Above 0.
+    pub adam_eps: f64,
+    /// Largest global L2 norm of the gradient; larger ones are scaled down
+    /// to it. 0 turns clipping off.
+    pub max_grad_norm: f64,
+    /// Huber loss: quadratic within this distance, linear beyond. Above 0.
+    pub huber_delta: f64,
+    /// `period` (hard copy) or `soft` (Polyak) target updates.
+    pub target_update: TargetUpdate,
+    /// Updates between hard target copies. At least 1.
+    pub target_period: u64,
+    /// Soft update fraction per update. In (0, 1].
+    pub target_tau: f64,
+    /// Importance-sampling exponent sent with every sample request (Ape-X:
+    /// 0.4). In [0, 1].
+    pub importance_beta: f64,
+    /// Added to |TD error| to form the new priority, so no item becomes
+    /// unsampleable. At least 0.
+    pub priority_eps: f64,
+    /// Sampled batches kept ready in the background, so the learner rarely
+    /// waits on the network. 1 to 64.
+    pub prefetch: u32,
+    /// Updates between weight publications (iceoryx2 and gRPC). At least 1.
+    pub publish_every: u64,
+    /// Whether to publish weights over iceoryx2 shared memory for actors on
+    /// this host (beside the gRPC stream).
+    pub shm_publish: bool,
+    /// Where checkpoints are written, listed and restored from; none turns
+    /// checkpoints (and their API) off.
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Updates between checkpoints; 0 writes them only on shutdown and on
+    /// request.
+    pub checkpoint_every: u64,
+    /// Newest checkpoints kept (the best by evaluation is kept besides).
+    /// At least 1.
+    pub checkpoint_keep: u32,
+    /// Evaluation metric that picks the best checkpoint (higher is
+    /// better), e.g. `success_rate`.
+    pub best_metric: String,
+    /// Whether to resume from the newest checkpoint at start.
+    pub resume: bool,
+    /// Bearer token the mutating checkpoint calls (save, restore, delete,
+    /// report evaluation) must carry; none leaves them open. Never logged.
+    pub api_token: Option<String>,
+    /// Stop after this many updates (counted over the run's life, so a
+    /// resumed run stops at the same step); 0 trains until shutdown.
+    pub max_updates: u64,
+}
+
+impl Default for LearnerConfig {
+    fn default() -> Self {
+        Self {
+            listen: SocketAddr::from(([127, 0, 0, 1], 50052)),
+            scenario: "left".to_owned(),
+            observation: "ttg".to_owned(),
+            action_set: "ttg".to_owned(),
+            trunk: Trunk::Mlp,
+            hidden: vec![256, 256],
+            seed: 1,
+            batch_size: 64,
+            optimizer: OptimizerKind::Rmsprop,
+            learning_rate: 2.5e-4,
+            rmsprop_decay: 0.95,
+            rmsprop_eps: 0.01,
+            adam_beta1: 0.9,
+            adam_beta2: 0.999,
+            adam_eps: 1.5e-4,
+            max_grad_norm: 10.0,
+            huber_delta: 1.0,
+            target_update: TargetUpdate::Period,
+            target_period: 2_500,
+            target_tau: 0.005,
+            importance_beta: 0.4,
+            priority_eps: 1e-6,
+            prefetch: 4,
+            publish_every: 50,
+            shm_publish: true,
+            checkpoint_dir: None,
+            checkpoint_every: 10_000,
+            checkpoint_keep: 3,
+            best_metric: "success_rate".to_owned(),
+            resume: true,
+            api_token: None,
+            max_updates: 0,
+        }
+    }
+}
+
+const OBSERVATIONS: [&str; 4] = ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
+const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
+
+impl LearnerConfig {
+    /// A copy safe to log or show: the API token replaced.
+    pub fn redacted(&self) -> Self {
+        let mut c = self.clone();
+        if c.api_token.is_some() {
+            c.api_token = Some("<redacted>".to_owned());
+        }
+        c
+    }
+
+    /// Range and relation checks, each with its dotted key.
+    pub fn validate(&self) -> Vec<(String, String)> {
+        let mut problems = Vec::new();
+        let mut check = |ok: bool, key: &str, problem: String| {
+            if !ok {
+                problems.push((format!("learner.{key}"), problem));
+            }
+        };
+        check(
+            OBSERVATIONS.contains(&self.observation.as_str()),
+            "observation",
+            format!(
+                "must be one of {}, got {:?}",
+                OBSERVATIONS.join(", "),
+                self.observation
+            ),
+        );
+        check(
+            ACTION_SETS.contains(&self.action_set.as_str()),
+            "action_set",
+            format!(
+                "must be one of {}, got {:?}",
+                ACTION_SETS.join(", "),
+                self.action_set
+            ),
+        );
+        check(
+            !self.hidden.is_empty() && self.hidden.iter().all(|&h| (1..=65_536).contains(&h)),
+            "hidden",
+            format!(
+                "must be a non-empty list of widths between 1 and 65536, got {:?}",
+                self.hidden
+            ),
+        );
+        check(
+            self.trunk != Trunk::Conv || self.hidden.len() >= 2,
+            "hidden",
+            format!(
+                "a conv trunk needs the channels of at least one convolution and then the fully connected width, got {:?}",
+                self.hidden
+            ),
+        );
+        check(
+            (1..=65_536).contains(&self.batch_size),
+            "batch_size",
+            format!("must be between 1 and 65536, got {}", self.batch_size),
+        );
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let fraction = |v: f64| (0.0..1.0).contains(&v);
+        for (key, v) in [
+            ("learning_rate", self.learning_rate),
+            ("rmsprop_eps", self.rmsprop_eps),
+            ("adam_eps", self.adam_eps),
+            ("huber_delta", self.huber_delta),
+        ] {
+            check(
+                positive(v),
+                key,
+                format!("must be finite and above 0, got {v}"),
+            );
+        }
+        for (key, v) in [
+            ("rmsprop_decay", self.rmsprop_decay),
+            ("adam_beta1", self.adam_beta1),
+            ("adam_beta2", self.adam_beta2),
+        ] {
+            check(fraction(v), key, format!("must be in [0, 1), got {v}"));
+        }
+        check(
+            self.max_grad_norm.is_finite() && self.max_grad_norm >= 0.0,
+            "max_grad_norm",
+            format!(
+                "must be finite and at least 0 (0 = no clipping), got {}",
+                self.max_grad_norm
+            ),
+        );
+        check(
+            self.target_period >= 1,
+            "target_period",
+            "must be at least 1".to_owned(),
+        );
+        check(
+            self.target_tau > 0.0 && self.target_tau <= 1.0,
+            "target_tau",
+            format!("must be in (0, 1], got {}", self.target_tau),
+        );
+        check(
+            (0.0..=1.0).contains(&self.importance_beta),
+            "importance_beta",
+            format!("must be in [0, 1], got {}", self.importance_beta),
+        );
+        check(
+            self.priority_eps.is_finite() && self.priority_eps >= 0.0,
+            "priority_eps",
+            format!("must be finite and at least 0, got {}", self.priority_eps),
+        );
+        check(
+            (1..=64).contains(&self.prefetch),
+            "prefetch",
+            format!("must be between 1 and 64, got {}", self.prefetch),
+        );
+        check(
+            self.publish_every >= 1,
+            "publish_every",
+            "must be at least 1".to_owned(),
+        );
+        check(
+            self.checkpoint_keep >= 1,
+            "checkpoint_keep",
+            "must be at least 1".to_owned(),
+        );
+        check(
+            !self.best_metric.is_empty(),
+            "best_metric",
+            "must name an evaluation metric".to_owned(),
+        );
+        check(
+            self.api_token
+                .as_ref()
+                .is_none_or(|t| !t.is_empty() && t.chars().all(|c| c.is_ascii_graphic())),
+            "api_token",
+            "must be non-empty printable ASCII without spaces".to_owned(),
+        );
+        problems
+    }
+}

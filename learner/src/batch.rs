@@ -1,0 +1,133 @@
+//! [`TrainingBatch`]: a sampled batch as the tensors an update needs,
+//! checked against the network at the boundary.
+
+use crossroads_common::TransitionBatch;
+use crossroads_common::transport::grpc::Sampled;
+use crossroads_model::NetworkSpec;
+use tch::Tensor;
+
+use crate::LearnerError;
+
+/// Dense tensors of one batch, in batch order, with the replay keys the
+/// priority update names.
+#[derive(Debug)]
+pub struct TrainingBatch {
+    /// States, `[batch, input]` f32.
+    pub obs: Tensor,
+    /// Actions taken, `[batch]` i64.
+    pub actions: Tensor,
+    /// Discounted rewards over each transition's steps, `[batch]`.
+    pub rewards: Tensor,
+    /// Bootstrap discounts gamma^k (0 at terminal), `[batch]`.
+    pub discounts: Tensor,
+    /// Next states, `[batch, input]`.
+    pub next_obs: Tensor,
+    /// Importance weights, `[batch]`.
+    pub weights: Tensor,
+    /// Replay keys, for the priority update.
+    pub keys: Vec<u64>,
+}
+
+impl TrainingBatch {
+    /// Number of transitions.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// Whether the batch is empty.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// The tensors of a sampled batch. Fails, naming the problem, when the
+    /// batch's observations or actions are not the network's, or weights
+    /// are not finite and positive.
+    pub fn from_sampled(sampled: &Sampled, spec: &NetworkSpec) -> Result<Self, LearnerError> {
+        if let Some((i, w)) = sampled
+            .weights
+            .iter()
+            .enumerate()
+            .find(|(_, w)| !(w.is_finite() && **w >= 0.0))
+        {
+            return Err(LearnerError::Batch(format!(
+                "importance weight {i} is {w}; expected finite and >= 0"
+            )));
+        }
+        Self::from_batch(&sampled.batch, &sampled.weights, sampled.keys.clone(), spec)
+    }
+
+    /// The tensors of `batch` with `weights` and `keys` (one each per
+    /// transition).
+    pub fn from_batch(
+        batch: &TransitionBatch,
+        weights: &[f32],
+        keys: Vec<u64>,
+        spec: &NetworkSpec,
+    ) -> Result<Self, LearnerError> {
+        let n = batch.len();
+        if n == 0 {
+            return Err(LearnerError::Batch("the batch is empty".to_owned()));
+        }
+        if weights.len() != n || keys.len() != n {
+            return Err(LearnerError::Batch(format!(
+                "{} weights and {} keys for {n} transitions",
+                weights.len(),
+                keys.len()
+            )));
+        }
+        let input = spec.input_len() as usize;
+        let values = batch.spec.num_values();
+        if values != Some(input) {
+            return Err(LearnerError::Batch(format!(
+                "observations are {} ({} values), the network reads {} ({input} values); \
+                 learner.observation must match what the actors send",
+                batch.spec,
+                values.map_or_else(|| "invalid".to_owned(), |v| v.to_string()),
+                spec.observation.kind,
+            )));
+        }
+        if batch.spec.kind != spec.observation.kind {
+            return Err(LearnerError::Batch(format!(
+                "observation kind is {:?}, the network reads {:?}",
+                batch.spec.kind, spec.observation.kind
+            )));
+        }
+        if i64::from(batch.num_actions) != spec.num_actions {
+            return Err(LearnerError::Batch(format!(
+                "the batch has {} actions, the network scores {} ({})",
+                batch.num_actions, spec.num_actions, spec.action_set
+            )));
+        }
+        batch
+            .validate()
+            .map_err(|e| LearnerError::Batch(e.to_string()))?;
+        let mut obs = vec![0f32; n * input];
+        let mut next = vec![0f32; n * input];
+        for i in 0..n {
+            let (s, s2) = (
+                batch.observation_index[i] as usize,
+                batch.next_observation_index[i] as usize,
+            );
+            batch
+                .observations
+                .decode_into(s, &mut obs[i * input..(i + 1) * input])
+                .and_then(|()| {
+                    batch
+                        .observations
+                        .decode_into(s2, &mut next[i * input..(i + 1) * input])
+                })
+                .map_err(|e| LearnerError::Batch(format!("observation of transition {i}: {e}")))?;
+        }
+        let actions: Vec<i64> = batch.actions.iter().map(|&a| i64::from(a)).collect();
+        let shape = [n as i64, input as i64];
+        Ok(Self {
+            obs: Tensor::from_slice(&obs).reshape(shape),
+            actions: Tensor::from_slice(&actions),
+            rewards: Tensor::from_slice(&batch.rewards),
+            discounts: Tensor::from_slice(&batch.discounts),
+            next_obs: Tensor::from_slice(&next).reshape(shape),
+            weights: Tensor::from_slice(weights),
+            keys,
+        })
+    }
+}

@@ -1,0 +1,344 @@
+//! [`LearnerClient`]: the learner service's client, for `crossroads
+//! checkpoints` and for actors (weights).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use crossroads_proto::v1 as pb;
+use crossroads_proto::v1::learner_client::LearnerClient as PbClient;
+use tonic::transport::{Channel, Endpoint};
+
+use crate::broadcast::PublishedWeights;
+use crate::checkpoint::validate_id;
+use crate::convert::{CheckpointSummary, checkpoint_from_wire, weights_from_wire};
+
+/// Why a learner call failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LearnerClientError {
+    /// The URL is not valid.
+    #[error("invalid learner endpoint {endpoint:?}: {message}")]
+    Endpoint {
+        /// The URL.
+        endpoint: String,
+        /// Why.
+        message: String,
+    },
+    /// The learner answered with an error status.
+    #[error("learner: {code:?}: {message}")]
+    Status {
+        /// gRPC code.
+        code: tonic::Code,
+        /// The learner's message.
+        message: String,
+    },
+    /// No answer in time.
+    #[error("the learner did not answer within {0:?}")]
+    Timeout(Duration),
+    /// The learner sent something invalid.
+    #[error("invalid answer from the learner: {0}")]
+    Invalid(String),
+    /// A pulled file could not be written.
+    #[error("{action} {}: {source}", path.display())]
+    Io {
+        /// What was being done.
+        action: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+impl LearnerClientError {
+    /// The gRPC code, if the learner answered.
+    pub fn code(&self) -> Option<tonic::Code> {
+        match self {
+            LearnerClientError::Status { code, .. } => Some(*code),
+            _ => None,
+        }
+    }
+}
+
+impl From<tonic::Status> for LearnerClientError {
+    fn from(s: tonic::Status) -> Self {
+        LearnerClientError::Status {
+            code: s.code(),
+            message: s.message().to_owned(),
+        }
+    }
+}
+
+/// Where training stands, as `Status` reports it.
+pub type LearnerStatus = pb::LearnerStatus;
+
+/// A connection to a learner. Cheap to clone.
+#[derive(Debug, Clone)]
+pub struct LearnerClient {
+    inner: PbClient<Channel>,
+    token: Option<String>,
+    timeout: Duration,
+}
+
+impl LearnerClient {
+    /// A client of `url` (e.g. `http://127.0.0.1:50052`), sending `token`
+    /// as a bearer token when given; connects lazily. Must be called inside
+    /// a tokio runtime.
+    pub fn new(
+        url: &str,
+        token: Option<String>,
+        timeout: Duration,
+    ) -> Result<Self, LearnerClientError> {
+        let endpoint = Endpoint::from_shared(url.to_owned())
+            .map_err(|e| LearnerClientError::Endpoint {
+                endpoint: url.to_owned(),
+                message: e.to_string(),
+            })?
+            .connect_timeout(timeout)
+            .tcp_nodelay(true);
+        Ok(Self {
+            inner: PbClient::new(endpoint.connect_lazy())
+                .max_decoding_message_size(1 << 30)
+                .max_encoding_message_size(16 << 20),
+            token,
+            timeout,
+        })
+    }
+
+    fn request<T>(&self, message: T) -> Result<tonic::Request<T>, LearnerClientError> {
+        let mut r = tonic::Request::new(message);
+        if let Some(token) = &self.token {
+            let value =
+                format!("Bearer {token}")
+                    .parse()
+                    .map_err(|_| LearnerClientError::Endpoint {
+                        endpoint: "token".to_owned(),
+                        message: "the token is not valid in an HTTP header".to_owned(),
+                    })?;
+            r.metadata_mut().insert("authorization", value);
+        }
+        Ok(r)
+    }
+
+    async fn bounded<T>(
+        &self,
+        call: impl Future<Output = Result<tonic::Response<T>, tonic::Status>>,
+    ) -> Result<T, LearnerClientError> {
+        match tokio::time::timeout(self.timeout, call).await {
+            Ok(Ok(r)) => Ok(r.into_inner()),
+            Ok(Err(s)) => Err(s.into()),
+            Err(_) => Err(LearnerClientError::Timeout(self.timeout)),
+        }
+    }
+
+    /// Stored checkpoints, newest first.
+    pub async fn list(&self) -> Result<Vec<CheckpointSummary>, LearnerClientError> {
+        let mut c = self.inner.clone();
+        let r = self
+            .bounded(c.list_checkpoints(self.request(pb::ListCheckpointsRequest {})?))
+            .await?;
+        Ok(r.checkpoints
+            .into_iter()
+            .map(checkpoint_from_wire)
+            .collect())
+    }
+
+    /// Writes a checkpoint now.
+    pub async fn save(&self) -> Result<CheckpointSummary, LearnerClientError> {
+        let mut c = self.inner.clone();
+        let r = self
+            .bounded(c.save_checkpoint(self.request(pb::SaveCheckpointRequest {})?))
+            .await?;
+        Ok(checkpoint_from_wire(r))
+    }
+
+    /// Restores a checkpoint; returns it and the version its weights were
+    /// published under.
+    pub async fn restore(&self, id: &str) -> Result<(CheckpointSummary, u64), LearnerClientError> {
+        let mut c = self.inner.clone();
+        let r = self
+            .bounded(c.restore_checkpoint(
+                self.request(pb::RestoreCheckpointRequest { id: id.to_owned() })?,
+            ))
+            .await?;
+        let info = r
+            .checkpoint
+            .ok_or_else(|| LearnerClientError::Invalid("no checkpoint in the answer".into()))?;
+        Ok((checkpoint_from_wire(info), r.weights_version))
+    }
+
+    /// Removes a checkpoint.
+    pub async fn delete(&self, id: &str) -> Result<(), LearnerClientError> {
+        let mut c = self.inner.clone();
+        self.bounded(
+            c.delete_checkpoint(self.request(pb::DeleteCheckpointRequest { id: id.to_owned() })?),
+        )
+        .await?;
+        Ok(())
+    }
+
+    /// Where training stands.
+    pub async fn status(&self) -> Result<LearnerStatus, LearnerClientError> {
+        let mut c = self.inner.clone();
+        self.bounded(c.status(self.request(pb::StatusRequest {})?))
+            .await
+    }
+
+    /// Reports an evaluation of a weights version.
+    pub async fn report_evaluation(
+        &self,
+        weights_version: u64,
+        metrics: BTreeMap<String, f64>,
+    ) -> Result<(), LearnerClientError> {
+        let mut c = self.inner.clone();
+        self.bounded(
+            c.report_evaluation(self.request(pb::ReportEvaluationRequest {
+                weights_version,
+                metrics: metrics.into_iter().collect(),
+            })?),
+        )
+        .await?;
+        Ok(())
+    }
+
+    /// The latest published weights.
+    pub async fn latest_weights(&self) -> Result<PublishedWeights, LearnerClientError> {
+        let mut c = self.inner.clone();
+        let w = self
+            .bounded(c.get_latest_weights(self.request(pb::GetLatestWeightsRequest {})?))
+            .await?;
+        weights_from_wire(w).map_err(LearnerClientError::Invalid)
+    }
+
+    /// Subscribes to weights newer than `have_version`: the latest comes at
+    /// once, then each new one.
+    pub async fn subscribe_weights(
+        &self,
+        have_version: u64,
+    ) -> Result<WeightsSubscription, LearnerClientError> {
+        let mut c = self.inner.clone();
+        let stream = self
+            .bounded(
+                c.subscribe_weights(self.request(pb::SubscribeWeightsRequest { have_version })?),
+            )
+            .await?;
+        Ok(WeightsSubscription { stream })
+    }
+
+    /// Downloads checkpoint `id` into `out/<id>/` (written under a
+    /// temporary name, then renamed); returns its description and folder.
+    /// File names from the learner are checked, so nothing is written
+    /// outside that folder.
+    pub async fn pull(
+        &self,
+        id: &str,
+        out: &Path,
+    ) -> Result<(CheckpointSummary, PathBuf), LearnerClientError> {
+        let mut c = self.inner.clone();
+        let mut stream = self
+            .bounded(
+                c.get_checkpoint(self.request(pb::GetCheckpointRequest { id: id.to_owned() })?),
+            )
+            .await?;
+        let io = |action: &'static str, path: &Path| {
+            let path = path.to_path_buf();
+            move |source| LearnerClientError::Io {
+                action,
+                path,
+                source,
+            }
+        };
+        let first = next_chunk(&mut stream, self.timeout)
+            .await?
+            .ok_or_else(|| LearnerClientError::Invalid("empty checkpoint stream".into()))?;
+        let info = checkpoint_from_wire(
+            first
+                .info
+                .ok_or_else(|| LearnerClientError::Invalid("first chunk has no info".into()))?,
+        );
+        validate_id(&info.id).map_err(|e| LearnerClientError::Invalid(e.to_string()))?;
+        std::fs::create_dir_all(out).map_err(io("creating", out))?;
+        let tmp = out.join(format!(".pull-{}-{}", info.id, std::process::id()));
+        let dest = out.join(&info.id);
+        std::fs::create_dir_all(&tmp).map_err(io("creating", &tmp))?;
+        let result = async {
+            let mut files: BTreeMap<String, (std::fs::File, u64, bool)> = BTreeMap::new();
+            while let Some(chunk) = next_chunk(&mut stream, self.timeout).await? {
+                if validate_id(&chunk.file).is_err() || !info.files.contains(&chunk.file) {
+                    return Err(LearnerClientError::Invalid(format!(
+                        "unexpected file name {:?}",
+                        chunk.file
+                    )));
+                }
+                let path = tmp.join(&chunk.file);
+                if !files.contains_key(&chunk.file) {
+                    let f = std::fs::File::create(&path).map_err(io("creating", &path))?;
+                    files.insert(chunk.file.clone(), (f, 0, false));
+                }
+                let Some((f, written, done)) = files.get_mut(&chunk.file) else {
+                    continue;
+                };
+                if *done || chunk.offset != *written {
+                    return Err(LearnerClientError::Invalid(format!(
+                        "chunk of {} at offset {} out of order",
+                        chunk.file, chunk.offset
+                    )));
+                }
+                std::io::Write::write_all(f, &chunk.data).map_err(io("writing", &path))?;
+                *written += chunk.data.len() as u64;
+                *done = chunk.end_of_file;
+            }
+            for name in &info.files {
+                match files.get(name) {
+                    Some((f, _, true)) => f.sync_all().map_err(io("syncing", &tmp.join(name)))?,
+                    _ => {
+                        return Err(LearnerClientError::Invalid(format!(
+                            "the stream ended before {name} was complete"
+                        )));
+                    }
+                }
+            }
+            Ok(())
+        }
+        .await;
+        if let Err(e) = result {
+            let _ = std::fs::remove_dir_all(&tmp);
+            return Err(e);
+        }
+        if dest.exists() {
+            std::fs::remove_dir_all(&dest).map_err(io("replacing", &dest))?;
+        }
+        std::fs::rename(&tmp, &dest).map_err(io("renaming into place", &dest))?;
+        Ok((info, dest))
+    }
+}
+
+async fn next_chunk(
+    stream: &mut tonic::Streaming<pb::CheckpointChunk>,
+    timeout: Duration,
+) -> Result<Option<pb::CheckpointChunk>, LearnerClientError> {
+    match tokio::time::timeout(timeout, stream.message()).await {
+        Ok(Ok(m)) => Ok(m),
+        Ok(Err(s)) => Err(s.into()),
+        Err(_) => Err(LearnerClientError::Timeout(timeout)),
+    }
+}
+
+/// A weights stream from [`LearnerClient::subscribe_weights`].
+#[derive(Debug)]
+pub struct WeightsSubscription {
+    stream: tonic::Streaming<pb::Weights>,
+}
+
+impl WeightsSubscription {
+    /// The next version (waits until one is published); `None` when the
+    /// learner ended the stream.
+    pub async fn next(&mut self) -> Result<Option<PublishedWeights>, LearnerClientError> {
+        match self.stream.message().await? {
+            Some(w) => weights_from_wire(w)
+                .map(Some)
+                .map_err(LearnerClientError::Invalid),
+            None => Ok(None),
+        }
+    }
+}

@@ -1,0 +1,157 @@
+//! Conversion between the learner's domain types and `crossroads_proto`,
+//! validating what comes in.
+
+use crossroads_model::{NetworkSpec, ObservationLayout, TrunkKind};
+use crossroads_proto::v1 as pb;
+
+use crate::broadcast::PublishedWeights;
+use crate::checkpoint::CheckpointEntry;
+
+/// A checkpoint as the API describes it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckpointSummary {
+    /// Folder name.
+    pub id: String,
+    /// Update step.
+    pub update_step: u64,
+    /// Weights version.
+    pub weights_version: u64,
+    /// Unix milliseconds.
+    pub created_unix_ms: i64,
+    /// Total bytes.
+    pub size_bytes: u64,
+    /// Scenario of the run.
+    pub scenario: String,
+    /// Latest evaluation when it was taken.
+    pub eval_metrics: std::collections::BTreeMap<String, f64>,
+    /// Kept as the best by evaluation.
+    pub best: bool,
+    /// Its files.
+    pub files: Vec<String>,
+}
+
+impl From<&CheckpointEntry> for CheckpointSummary {
+    fn from(e: &CheckpointEntry) -> Self {
+        Self {
+            id: e.manifest.id.clone(),
+            update_step: e.manifest.update_step,
+            weights_version: e.manifest.weights_version,
+            created_unix_ms: e.manifest.created_unix_ms,
+            size_bytes: e.size_bytes,
+            scenario: e.manifest.scenario.clone(),
+            eval_metrics: e.manifest.eval_metrics.clone(),
+            best: e.best,
+            files: e.files(),
+        }
+    }
+}
+
+/// To the wire.
+pub fn checkpoint_to_wire(c: &CheckpointSummary) -> pb::CheckpointInfo {
+    pb::CheckpointInfo {
+        id: c.id.clone(),
+        update_step: c.update_step,
+        weights_version: c.weights_version,
+        created_unix_ms: c.created_unix_ms,
+        size_bytes: c.size_bytes,
+        scenario: c.scenario.clone(),
+        eval_metrics: c.eval_metrics.clone().into_iter().collect(),
+        best: c.best,
+        files: c.files.clone(),
+    }
+}
+
+/// From the wire.
+pub fn checkpoint_from_wire(c: pb::CheckpointInfo) -> CheckpointSummary {
+    CheckpointSummary {
+        id: c.id,
+        update_step: c.update_step,
+        weights_version: c.weights_version,
+        created_unix_ms: c.created_unix_ms,
+        size_bytes: c.size_bytes,
+        scenario: c.scenario,
+        eval_metrics: c.eval_metrics.into_iter().collect(),
+        best: c.best,
+        files: c.files,
+    }
+}
+
+/// A network spec on the wire: observation kind and `[channels, rows,
+/// cols]`, the dense features after the grid in `extra_features`.
+pub fn spec_to_wire(s: &NetworkSpec) -> pb::NetworkSpec {
+    let o = &s.observation;
+    pb::NetworkSpec {
+        observation: Some(pb::ObservationSpec {
+            kind: o.kind.clone(),
+            shape: [o.channels, o.rows, o.cols]
+                .iter()
+                .map(|&d| d as u32)
+                .collect(),
+        }),
+        action_set: s.action_set.clone(),
+        num_actions: s.num_actions as u32,
+        trunk: s.trunk.name().to_owned(),
+        hidden: s.hidden.iter().map(|&h| h as u32).collect(),
+        extra_features: o.extra as u32,
+    }
+}
+
+/// A network spec from the wire, checked.
+pub fn spec_from_wire(s: pb::NetworkSpec) -> Result<NetworkSpec, String> {
+    let o = s.observation.ok_or("spec.observation is missing")?;
+    let [channels, rows, cols] = o.shape[..] else {
+        return Err(format!(
+            "spec.observation.shape must be [channels, rows, cols], got {:?}",
+            o.shape
+        ));
+    };
+    let spec = NetworkSpec {
+        observation: ObservationLayout {
+            kind: o.kind,
+            channels: i64::from(channels),
+            rows: i64::from(rows),
+            cols: i64::from(cols),
+            extra: i64::from(s.extra_features),
+        },
+        action_set: s.action_set,
+        num_actions: i64::from(s.num_actions),
+        trunk: TrunkKind::parse(&s.trunk).map_err(|e| e.to_string())?,
+        hidden: s.hidden.iter().map(|&h| i64::from(h)).collect(),
+    };
+    spec.validate().map_err(|e| e.to_string())?;
+    Ok(spec)
+}
+
+/// Weights to the wire.
+pub fn weights_to_wire(w: &PublishedWeights) -> pb::Weights {
+    pb::Weights {
+        version: w.version,
+        update_step: w.update_step,
+        spec: Some(spec_to_wire(&w.spec)),
+        safetensors: w.safetensors.clone(),
+        published_unix_ms: w.published_unix_ms,
+    }
+}
+
+/// Weights from the wire, checked: a valid spec, the same spec and version
+/// in the safetensors metadata as in the message.
+pub fn weights_from_wire(w: pb::Weights) -> Result<PublishedWeights, String> {
+    let spec = spec_from_wire(w.spec.ok_or("weights.spec is missing")?)?;
+    let (metadata, _) =
+        crossroads_model::weights::decode(&w.safetensors).map_err(|e| e.to_string())?;
+    let meta =
+        crossroads_model::WeightsMeta::from_metadata(&metadata).map_err(|e| e.to_string())?;
+    if meta.spec != spec || meta.version != w.version {
+        return Err(format!(
+            "the message says version {} of {spec:?}, its safetensors version {} of {:?}",
+            w.version, meta.version, meta.spec
+        ));
+    }
+    Ok(PublishedWeights {
+        version: w.version,
+        update_step: w.update_step,
+        spec,
+        safetensors: w.safetensors,
+        published_unix_ms: w.published_unix_ms,
+    })
+}

@@ -1,0 +1,151 @@
+//! The learner's two conversations with the replay server, each a
+//! background task: [`spawn_prefetch`] keeps sampled batches decoded and
+//! ready while the previous update runs, [`spawn_priority_sender`] sends
+//! priority updates without making the training loop wait.
+
+use std::time::Duration;
+
+use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_common::{Backoff, Shutdown};
+use crossroads_model::NetworkSpec;
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use crate::LearnerError;
+use crate::batch::TrainingBatch;
+use crate::metrics::LearnerMetrics;
+
+/// What the prefetcher hands over: a batch ready for an update, or the
+/// error that stopped it.
+pub type Prefetched = Result<TrainingBatch, LearnerError>;
+
+/// Longest a sample request waits for the replay's rate limiter before it
+/// is asked again (so shutdown and logs stay timely).
+const SAMPLE_WAIT: Duration = Duration::from_secs(1);
+
+/// What the prefetcher asks for.
+#[derive(Debug, Clone)]
+pub struct PrefetchConfig {
+    /// Transitions per batch.
+    pub batch_size: u32,
+    /// Importance exponent.
+    pub beta: f32,
+    /// Batches kept ready.
+    pub depth: usize,
+    /// The network the batches must fit.
+    pub spec: NetworkSpec,
+}
+
+/// Samples continuously, keeping up to `depth` decoded batches in the
+/// returned channel. Retries what can succeed later (server down, rate
+/// limited) with backoff; a batch that does not fit the network or a
+/// request the server refuses is sent as an error, and the task ends.
+pub fn spawn_prefetch(
+    client: ReplayClient,
+    config: PrefetchConfig,
+    mut backoff: Backoff,
+    metrics: LearnerMetrics,
+    shutdown: Shutdown,
+) -> (mpsc::Receiver<Prefetched>, JoinHandle<()>) {
+    let (tx, rx) = mpsc::channel(config.depth.max(1));
+    let task = tokio::spawn(async move {
+        let mut warned = false;
+        loop {
+            let sampled = tokio::select! {
+                _ = shutdown.wait() => break,
+                r = client.sample(config.batch_size, config.beta, SAMPLE_WAIT) => r,
+            };
+            match sampled {
+                Ok(sampled) => {
+                    if warned {
+                        tracing::info!("sampling from the replay server again");
+                        warned = false;
+                    }
+                    backoff.reset();
+                    let batch = TrainingBatch::from_sampled(&sampled, &config.spec);
+                    let fatal = batch.is_err();
+                    let sent = tokio::select! {
+                        _ = shutdown.wait() => break,
+                        r = tx.send(batch) => r,
+                    };
+                    if sent.is_err() || fatal {
+                        break;
+                    }
+                }
+                Err(e) if e.code() == Some(tonic::Code::DeadlineExceeded) => {
+                    // The rate limiter holds sampling back (the table is
+                    // filling); the server already waited, so ask again.
+                    if !warned {
+                        tracing::info!(error = %e, "waiting for the replay server to allow sampling");
+                        warned = true;
+                    }
+                }
+                Err(e) if e.is_retryable() => {
+                    metrics.replay_errors.with_label_values(&["sample"]).inc();
+                    let delay = backoff.next_delay();
+                    if !warned {
+                        tracing::warn!(error = %e, retry_in = ?delay, "sampling from the replay server failed; retrying");
+                        warned = true;
+                    }
+                    tokio::select! {
+                        _ = shutdown.wait() => break,
+                        _ = tokio::time::sleep(delay) => {}
+                    }
+                }
+                Err(e) => {
+                    metrics.replay_errors.with_label_values(&["sample"]).inc();
+                    let _ = tx.send(Err(e.into())).await;
+                    break;
+                }
+            }
+        }
+    });
+    (rx, task)
+}
+
+/// One priority update: keys and their new priorities.
+pub type PriorityUpdate = (Vec<u64>, Vec<f32>);
+
+/// Sends priority updates in order, in the background. The training loop
+/// `try_send`s into the returned channel (of `capacity` updates) and counts
+/// an update as dropped when it is full rather than wait. Failures are
+/// counted and logged; a lost update only leaves old priorities in place.
+pub fn spawn_priority_sender(
+    client: ReplayClient,
+    capacity: usize,
+    metrics: LearnerMetrics,
+    shutdown: Shutdown,
+) -> (mpsc::Sender<PriorityUpdate>, JoinHandle<()>) {
+    let (tx, mut rx) = mpsc::channel::<PriorityUpdate>(capacity.max(1));
+    let task = tokio::spawn(async move {
+        let mut failing = false;
+        loop {
+            let update = tokio::select! {
+                _ = shutdown.wait() => break,
+                u = rx.recv() => u,
+            };
+            let Some((keys, priorities)) = update else {
+                break;
+            };
+            match client.update_priorities(keys, priorities).await {
+                Ok(_) => {
+                    if failing {
+                        tracing::info!("priority updates reach the replay server again");
+                        failing = false;
+                    }
+                }
+                Err(e) => {
+                    metrics
+                        .replay_errors
+                        .with_label_values(&["update_priorities"])
+                        .inc();
+                    if !failing {
+                        tracing::warn!(error = %e, "priority update failed");
+                        failing = true;
+                    }
+                }
+            }
+        }
+    });
+    (tx, task)
+}

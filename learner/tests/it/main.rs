@@ -1,0 +1,37 @@
+//! Integration tests of the learner: the update's arithmetic, learning a
+//! known MDP, checkpoints and exact resume, and the gRPC service over a real
+//! loopback socket against a real replay server.
+
+mod checkpoints;
+mod python;
+mod server;
+mod training;
+
+use crossroads_common::{ObservationEncoding, ObservationSpec, TransitionBatch};
+use crossroads_model::{NetworkSpec, ObservationLayout, TrunkKind};
+
+/// A network over `n` one-hot states.
+pub fn toy_spec(n: i64, actions: i64, hidden: Vec<i64>) -> NetworkSpec {
+    NetworkSpec {
+        observation: ObservationLayout {
+            kind: "toy".to_owned(),
+            channels: 1,
+            rows: 1,
+            cols: n,
+            extra: 0,
+        },
+        action_set: "toy".to_owned(),
+        num_actions: actions,
+        trunk: TrunkKind::Mlp,
+        hidden,
+    }
+}
+
+/// An empty batch of the toy network's observations.
+pub fn toy_batch(spec: &NetworkSpec) -> TransitionBatch {
+    TransitionBatch::new(
+        ObservationSpec::new("toy", [spec.input_len() as u32]),
+        spec.num_actions as u32,
+        ObservationEncoding::DenseF32,
+    )
+}

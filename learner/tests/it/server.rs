@@ -1,0 +1,301 @@
+//! The learner as a user runs it: a real replay server and the learner
+//! service over loopback gRPC (port 0), checkpoints on disk, Prometheus
+//! text from the registry.
+
+use std::path::Path;
+use std::time::Duration;
+
+use crossroads_common::Config;
+use crossroads_common::Shutdown;
+use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_learner::bench::fill_replay;
+use crossroads_learner::{LearnerClient, RunningLearner, TrainerConfig};
+use tonic::Code;
+
+const TOKEN: &str = "s3cret-token";
+
+struct Replay {
+    shutdown: Shutdown,
+    server: crossroads_replay::RunningServer,
+}
+
+async fn replay_with_data(config: &Config) -> Replay {
+    let mut c = config.clone();
+    c.replay.listen = ([127, 0, 0, 1], 0).into();
+    c.replay.shm_ingest = false;
+    c.replay.min_size_to_sample = 1;
+    c.replay.snapshot_dir = None;
+    let shutdown = Shutdown::new();
+    let server = crossroads_replay::start(&c, None, shutdown.clone())
+        .await
+        .expect("test setup");
+    let mut transport = c.transport.clone();
+    transport.replay_endpoint = format!("http://{}", server.local_addr());
+    let client = ReplayClient::new(&transport, &c.replay.table).expect("test setup");
+    let spec = TrainerConfig::from_config(&c.learner)
+        .expect("test setup")
+        .spec;
+    fill_replay(&client, &spec, 2_000)
+        .await
+        .expect("test setup");
+    Replay { shutdown, server }
+}
+
+fn learner_config(checkpoints: &Path) -> Config {
+    let mut c = Config::default();
+    c.learner.listen = ([127, 0, 0, 1], 0).into();
+    c.learner.observation = "sequential".to_owned();
+    c.learner.action_set = "ttg".to_owned();
+    c.learner.hidden = vec![32, 32];
+    c.learner.batch_size = 16;
+    c.learner.publish_every = 5;
+    c.learner.checkpoint_every = 0;
+    c.learner.checkpoint_dir = Some(checkpoints.to_path_buf());
+    c.learner.shm_publish = false;
+    c.learner.api_token = Some(TOKEN.to_owned());
+    c
+}
+
+async fn start_learner(
+    config: &Config,
+    replay: &Replay,
+    registry: Option<&prometheus::Registry>,
+) -> RunningLearner {
+    let mut c = config.clone();
+    c.transport.replay_endpoint = format!("http://{}", replay.server.local_addr());
+    crossroads_learner::start(&c, registry, Shutdown::new())
+        .await
+        .expect("test setup")
+}
+
+fn client(learner: &RunningLearner, token: Option<&str>) -> LearnerClient {
+    LearnerClient::new(
+        &format!("http://{}", learner.local_addr()),
+        token.map(str::to_owned),
+        Duration::from_secs(30),
+    )
+    .expect("test setup")
+}
+
+async fn wait_for_step(c: &LearnerClient, step: u64) {
+    for _ in 0..600 {
+        if c.status().await.expect("test setup").update_step >= step {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("the learner did not reach step {step}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn checkpoint_api_validates_ids_and_tokens_over_grpc() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = learner_config(&dir.path().join("ckpts"));
+    let replay = replay_with_data(&config).await;
+    let learner = start_learner(&config, &replay, None).await;
+    let open = client(&learner, Some(TOKEN));
+    let anonymous = client(&learner, None);
+    let wrong = client(&learner, Some("nope"));
+    wait_for_step(&open, 10).await;
+
+    // Mutating calls need the token; reading ones do not.
+    for c in [&anonymous, &wrong] {
+        let err = c.save().await.unwrap_err();
+        assert_eq!(err.code(), Some(Code::Unauthenticated), "{err}");
+        let err = c.delete("ckpt-000000000001").await.unwrap_err();
+        assert_eq!(err.code(), Some(Code::Unauthenticated), "{err}");
+        let err = c.restore("ckpt-000000000001").await.unwrap_err();
+        assert_eq!(err.code(), Some(Code::Unauthenticated), "{err}");
+    }
+    assert!(anonymous.list().await.unwrap().is_empty());
+
+    let saved = open.save().await.unwrap();
+    assert!(saved.update_step >= 10);
+    assert_eq!(saved.scenario, "left");
+    let listed = anonymous.list().await.unwrap();
+    assert_eq!(listed.len(), 1);
+    assert_eq!(listed[0].id, saved.id);
+    assert!(listed[0].files.contains(&"weights.safetensors".to_owned()));
+
+    // Ids: unknown is NOT_FOUND, escaping is INVALID_ARGUMENT, for every call.
+    let out = tempfile::tempdir().unwrap();
+    for (id, code) in [
+        ("ckpt-999999999999", Code::NotFound),
+        ("../../etc", Code::InvalidArgument),
+        ("..", Code::InvalidArgument),
+        ("a/b", Code::InvalidArgument),
+        ("", Code::InvalidArgument),
+    ] {
+        let err = anonymous.pull(id, out.path()).await.unwrap_err();
+        assert_eq!(err.code(), Some(code), "pull {id:?}: {err}");
+        let err = open.restore(id).await.unwrap_err();
+        assert_eq!(err.code(), Some(code), "restore {id:?}: {err}");
+        let err = open.delete(id).await.unwrap_err();
+        assert_eq!(err.code(), Some(code), "delete {id:?}: {err}");
+    }
+
+    // Pull streams the files; they are byte-identical to the learner's.
+    let (info, folder) = anonymous.pull(&saved.id, out.path()).await.unwrap();
+    assert_eq!(info.id, saved.id);
+    for file in &info.files {
+        let ours = std::fs::read(folder.join(file)).unwrap();
+        let theirs = std::fs::read(dir.path().join("ckpts").join(&saved.id).join(file)).unwrap();
+        assert_eq!(ours, theirs, "{file}");
+    }
+
+    // Restore publishes the checkpoint's weights under a higher version.
+    let before = open.status().await.unwrap();
+    let (restored, version) = open.restore(&saved.id).await.unwrap();
+    assert_eq!(restored.id, saved.id);
+    assert!(version > before.weights_version);
+    let latest = anonymous.latest_weights().await.unwrap();
+    assert!(latest.version >= version);
+
+    // Evaluation reports are validated and recorded.
+    let err = open
+        .report_evaluation(version, [("success_rate".to_owned(), f64::NAN)].into())
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), Some(Code::InvalidArgument), "{err}");
+    open.report_evaluation(version, [("success_rate".to_owned(), 0.75)].into())
+        .await
+        .unwrap();
+    let second = open.save().await.unwrap();
+    assert_eq!(second.eval_metrics.get("success_rate"), Some(&0.75));
+    assert!(second.best);
+
+    open.delete(&saved.id).await.unwrap();
+    let err = open.delete(&saved.id).await.unwrap_err();
+    assert_eq!(err.code(), Some(Code::NotFound));
+
+    learner.stop();
+    learner.join().await.unwrap();
+    replay.shutdown.trigger();
+    replay.server.join().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn resume_after_restart_continues_step_and_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = learner_config(&dir.path().join("ckpts"));
+    config.learner.max_updates = 30;
+    let replay = replay_with_data(&config).await;
+
+    let registry = crossroads_common::metrics::registry("learner").unwrap();
+    let first = start_learner(&config, &replay, Some(&registry)).await;
+    let c = client(&first, None);
+    // A late subscriber gets the latest weights at once.
+    let mut sub = c.subscribe_weights(0).await.unwrap();
+    let got = sub.next().await.unwrap().unwrap();
+    assert!(got.version >= 1);
+    first.join().await.unwrap();
+
+    // The last checkpoint holds step 30 and the last version published.
+    let store =
+        crossroads_learner::CheckpointStore::open(dir.path().join("ckpts"), 3, "success_rate")
+            .unwrap();
+    let entries = store.list().unwrap();
+    let last = &entries[0].manifest;
+    assert_eq!(last.update_step, 30);
+    let version_then = last.weights_version;
+    assert!(version_then >= 30 / 5);
+
+    // Prometheus text of the first run.
+    let text = crossroads_common::metrics::render(&registry);
+    let scrape = prometheus_parse::Scrape::parse(text.lines().map(|l| Ok(l.to_owned()))).unwrap();
+    let value = |name: &str| {
+        scrape
+            .samples
+            .iter()
+            .find(|s| s.metric == name)
+            .map(|s| match s.value {
+                prometheus_parse::Value::Counter(v) | prometheus_parse::Value::Gauge(v) => v,
+                prometheus_parse::Value::Untyped(v) => v,
+                _ => f64::NAN,
+            })
+            .unwrap_or_else(|| panic!("{name} missing from\n{text}"))
+    };
+    assert_eq!(value("crossroads_learner_updates_total"), 30.0);
+    assert_eq!(
+        value("crossroads_learner_weights_version"),
+        version_then as f64
+    );
+    assert_eq!(value("crossroads_learner_checkpoints_total"), 1.0);
+    assert!(value("crossroads_learner_loss").is_finite());
+    assert!(value("crossroads_learner_grad_norm") > 0.0);
+    for name in [
+        "crossroads_learner_q_mean",
+        "crossroads_learner_q_max",
+        "crossroads_learner_td_error_abs_mean",
+        "crossroads_learner_sample_wait_seconds_total",
+        "crossroads_learner_checkpoint_age_seconds",
+    ] {
+        assert!(value(name).is_finite(), "{name}");
+    }
+    assert!(text.contains("crossroads_learner_sample_wait_seconds_bucket"));
+
+    // Restart: the step continues from 30, the version from the last one.
+    config.learner.max_updates = 50;
+    let second = start_learner(&config, &replay, None).await;
+    let c = client(&second, None);
+    let status = c.status().await.unwrap();
+    assert!(status.update_step >= 30, "{status:?}");
+    assert!(status.weights_version > version_then, "{status:?}");
+    let w = c.latest_weights().await.unwrap();
+    assert!(w.version > version_then);
+    second.join().await.unwrap();
+    let entries = store.list().unwrap();
+    assert_eq!(entries[0].manifest.update_step, 50);
+    assert!(entries[0].manifest.weights_version > version_then);
+
+    replay.shutdown.trigger();
+    replay.server.join().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = learner_config(&dir.path().join("ckpts"));
+    let replay = replay_with_data(&config).await;
+    let mut other = config.clone();
+    other.learner.observation = "ttg".to_owned();
+    other.learner.resume = false;
+    other.learner.checkpoint_dir = None;
+    let learner = start_learner(&other, &replay, None).await;
+    let err = learner.join().await.unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("sequential") && text.contains("ttg"),
+        "{text}"
+    );
+    assert!(text.contains("learner.observation"), "{text}");
+    replay.shutdown.trigger();
+    replay.server.join().await.unwrap();
+}
+
+#[test]
+fn weights_reach_a_late_shared_memory_subscriber() {
+    use crossroads_learner::shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
+    let transport = crossroads_common::TransportConfig {
+        shm_prefix: format!("crossroads-test-{}-weights", std::process::id()),
+        ..Default::default()
+    };
+    let mut publisher = ShmWeightsPublisher::new(&transport, 1024).unwrap();
+    publisher.publish(1, 10, 123, &[1, 2, 3]).unwrap();
+    publisher.publish(2, 20, 456, &[4, 5, 6, 7]).unwrap();
+    let mut subscriber = ShmWeightsSubscriber::new(&transport).unwrap();
+    publisher.update_connections();
+    let got = subscriber
+        .latest()
+        .unwrap()
+        .expect("history delivers the latest");
+    assert_eq!(
+        (got.version, got.update_step, got.safetensors),
+        (2, 20, vec![4, 5, 6, 7])
+    );
+    // A larger payload than the first slot grows it.
+    let big = vec![9u8; 5000];
+    publisher.publish(3, 30, 789, &big).unwrap();
+    let got = subscriber.latest().unwrap().unwrap();
+    assert_eq!((got.version, got.safetensors.len()), (3, 5000));
+}

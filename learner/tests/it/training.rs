@@ -1,0 +1,294 @@
+//! The update: targets, loss, optimizers, and learning a small known MDP.
+
+use crossroads_common::Transition;
+use crossroads_common::config::TargetUpdate;
+use crossroads_learner::optimizer::{Optimizer, OptimizerConfig};
+use crossroads_learner::targets::{double_dqn_targets, taken, weighted_huber};
+use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
+use crossroads_model::NetworkSpec;
+use tch::{Kind, Tensor};
+
+use crate::{toy_batch, toy_spec};
+
+fn values(t: &Tensor) -> Vec<f32> {
+    Vec::try_from(t.flatten(0, -1).to_kind(Kind::Float)).expect("test setup")
+}
+
+fn close(got: &[f32], want: &[f32], tol: f32) {
+    assert_eq!(got.len(), want.len(), "got {got:?}, want {want:?}");
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() <= tol, "got {got:?}, want {want:?}");
+    }
+}
+
+#[test]
+fn double_dqn_n_step_targets_on_a_hand_made_batch() {
+    // Online picks the action, target values it: row 0 online argmax is 1
+    // (target 20, not the target's own max 30); row 1 argmax 0 (target 7).
+    let q_online_next =
+        Tensor::from_slice(&[1.0f32, 3.0, 2.0, 5.0, 0.0, 1.0, 0.0, 0.0, 9.0]).reshape([3, 3]);
+    let q_target_next =
+        Tensor::from_slice(&[10.0f32, 20.0, 30.0, 7.0, 8.0, 9.0, 1.0, 2.0, 4.0]).reshape([3, 3]);
+    let gamma = 0.99f32;
+    // A one-step transition, a terminal one, and a 4-step action whose
+    // reward is already the discounted sum over its steps.
+    let rewards = Tensor::from_slice(&[
+        1.0f32,
+        -1.0,
+        -0.01 * (1.0 + gamma + gamma.powi(2) + gamma.powi(3)),
+    ]);
+    let discounts = Tensor::from_slice(&[gamma, 0.0, gamma.powi(4)]);
+    let y =
+        tch::no_grad(|| double_dqn_targets(&q_online_next, &q_target_next, &rewards, &discounts));
+    let r2 = -0.01 * (1.0 + gamma + gamma.powi(2) + gamma.powi(3));
+    close(
+        &values(&y),
+        &[1.0 + gamma * 20.0, -1.0, r2 + gamma.powi(4) * 4.0],
+        1e-5,
+    );
+}
+
+#[test]
+fn loss_is_huber_weighted_by_importance() {
+    let q = Tensor::from_slice(&[0.0f32, 1.0, 5.0, 2.0]).reshape([2, 2]);
+    let actions = Tensor::from_slice(&[1i64, 0]);
+    let q_sa = taken(&q, &actions);
+    close(&values(&q_sa), &[1.0, 5.0], 0.0);
+    // TD errors 0.5 (quadratic: 0.125) and 3 (linear: 3 - 0.5 = 2.5).
+    let targets = Tensor::from_slice(&[1.5f32, 2.0]);
+    let weights = Tensor::from_slice(&[1.0f32, 0.5]);
+    let loss = weighted_huber(&q_sa, &targets, &weights, 1.0);
+    close(&values(&loss), &[(0.125 + 0.5 * 2.5) / 2.0], 1e-6);
+}
+
+#[test]
+fn rmsprop_and_adam_follow_their_update_rules() {
+    // loss = 2 p, so the gradient is 2.
+    let run = |config: OptimizerConfig| {
+        let p = Tensor::from_slice(&[1.0f32]).set_requires_grad(true);
+        let mut opt = Optimizer::new(config, vec![("p".to_owned(), p.shallow_clone())]);
+        opt.zero_grad();
+        (&p * 2.0).sum(Kind::Float).backward();
+        let norm = opt.clip_grad_norm(0.0);
+        opt.step();
+        (values(&p.detach())[0], norm)
+    };
+    let (p, norm) = run(OptimizerConfig::Rmsprop {
+        lr: 0.1,
+        decay: 0.95,
+        eps: 0.01,
+    });
+    assert!((norm - 2.0).abs() < 1e-9);
+    let v = 0.05f32 * 4.0;
+    close(&[p], &[1.0 - 0.1 * 2.0 / (v.sqrt() + 0.01)], 1e-6);
+    let (p, _) = run(OptimizerConfig::Adam {
+        lr: 0.1,
+        beta1: 0.9,
+        beta2: 0.999,
+        eps: 1e-8,
+    });
+    // First Adam step moves by lr * m_hat / (sqrt(v_hat) + eps) = lr.
+    close(&[p], &[0.9], 1e-6);
+}
+
+#[test]
+fn clipping_scales_the_gradient_to_the_limit() {
+    let p = Tensor::from_slice(&[1.0f32, 1.0]).set_requires_grad(true);
+    let mut opt = Optimizer::new(
+        OptimizerConfig::Rmsprop {
+            lr: 0.1,
+            decay: 0.9,
+            eps: 0.01,
+        },
+        vec![("p".to_owned(), p.shallow_clone())],
+    );
+    opt.zero_grad();
+    (&p * Tensor::from_slice(&[3.0f32, 4.0]))
+        .sum(Kind::Float)
+        .backward();
+    let norm = opt.clip_grad_norm(1.0);
+    assert!((norm - 5.0).abs() < 1e-6);
+    close(&values(&p.grad()), &[0.6, 0.8], 1e-5);
+}
+
+/// A deterministic semi-MDP over three states, with multi-step actions
+/// (bootstrap discount gamma^k), and its exact Q* by value iteration.
+struct Chain {
+    gamma: f64,
+    /// (state, action) -> (reward, k, next state or None for terminal).
+    moves: Vec<(usize, usize, f64, i32, Option<usize>)>,
+}
+
+impl Chain {
+    fn new() -> Self {
+        Self {
+            gamma: 0.9,
+            moves: vec![
+                (0, 0, 0.5, 1, None),
+                (0, 1, -0.1, 2, Some(1)),
+                (1, 0, 1.0, 1, None),
+                (1, 1, 0.0, 1, Some(2)),
+                (2, 0, 2.0, 1, None),
+                (2, 1, 0.0, 4, Some(0)),
+            ],
+        }
+    }
+
+    fn q_star(&self) -> [[f64; 2]; 3] {
+        let mut q = [[0.0f64; 2]; 3];
+        for _ in 0..1000 {
+            let v: Vec<f64> = q.iter().map(|r| r[0].max(r[1])).collect();
+            for &(s, a, r, k, next) in &self.moves {
+                q[s][a] = r + next.map_or(0.0, |n| self.gamma.powi(k) * v[n]);
+            }
+        }
+        q
+    }
+
+    fn batch(&self, spec: &NetworkSpec) -> TrainingBatch {
+        let mut b = toy_batch(spec);
+        let one_hot = |s: usize| {
+            let mut v = vec![0.0f32; 3];
+            v[s] = 1.0;
+            v
+        };
+        let states: Vec<u32> = (0..3).map(|s| b.push_observation(&one_hot(s))).collect();
+        for &(s, a, r, k, next) in &self.moves {
+            b.push(Transition {
+                observation: states[s],
+                action: a as u32,
+                reward: r as f32,
+                discount: next.map_or(0.0, |_| self.gamma.powi(k) as f32),
+                priority: 1.0,
+                next_observation: states[next.unwrap_or(0)],
+            });
+        }
+        let n = b.len();
+        TrainingBatch::from_batch(&b, &vec![1.0; n], (0..n as u64).collect(), spec)
+            .expect("test setup")
+    }
+}
+
+fn trainer(spec: NetworkSpec, optimizer: OptimizerConfig, target: TargetUpdate) -> Trainer {
+    Trainer::new(TrainerConfig {
+        spec,
+        seed: 3,
+        optimizer,
+        max_grad_norm: 10.0,
+        huber_delta: 1.0,
+        target_update: target,
+        target_period: 25,
+        target_tau: 0.05,
+        priority_eps: 1e-6,
+    })
+    .expect("test setup")
+}
+
+#[test]
+fn learns_the_q_values_of_a_small_known_mdp() {
+    let chain = Chain::new();
+    let q_star = chain.q_star();
+    // Sanity of the hand-made MDP: the best first move is the long way.
+    assert!((q_star[0][1] - (-0.1 + 0.81 * 1.8)).abs() < 1e-9);
+    let spec = toy_spec(3, 2, vec![32]);
+    let batch = chain.batch(&spec);
+    for (optimizer, target) in [
+        (
+            OptimizerConfig::Adam {
+                lr: 0.01,
+                beta1: 0.9,
+                beta2: 0.999,
+                eps: 1e-8,
+            },
+            TargetUpdate::Period,
+        ),
+        (
+            OptimizerConfig::Rmsprop {
+                lr: 0.003,
+                decay: 0.95,
+                eps: 0.01,
+            },
+            TargetUpdate::Soft,
+        ),
+    ] {
+        let mut t = trainer(spec.clone(), optimizer, target);
+        let mut last = None;
+        for _ in 0..3000 {
+            last = Some(t.update(&batch).unwrap());
+        }
+        let q = t
+            .online()
+            .q_values(&Tensor::eye(3, (Kind::Float, tch::Device::Cpu)))
+            .unwrap();
+        let got = values(&q);
+        let want: Vec<f32> = q_star.iter().flatten().map(|&v| v as f32).collect();
+        for (g, w) in got.iter().zip(&want) {
+            assert!(
+                (g - w).abs() < 0.03,
+                "{optimizer:?}: learned {got:?}, Q* is {want:?}"
+            );
+        }
+        let stats = last.unwrap();
+        assert_eq!(stats.step, 3000);
+        assert!(stats.td_abs_mean < 0.03, "{stats:?}");
+        assert_eq!(stats.priorities.len(), 6);
+    }
+}
+
+#[test]
+fn a_batch_of_another_network_is_refused_naming_the_mismatch() {
+    let spec = toy_spec(3, 2, vec![8]);
+    let other = toy_spec(4, 2, vec![8]);
+    let mut b = toy_batch(&other);
+    let s = b.push_observation(&[1.0, 0.0, 0.0, 0.0]);
+    b.push(Transition {
+        observation: s,
+        action: 0,
+        reward: 0.0,
+        discount: 0.9,
+        priority: 1.0,
+        next_observation: s,
+    });
+    let err = TrainingBatch::from_batch(&b, &[1.0], vec![0], &spec).unwrap_err();
+    assert!(err.to_string().contains("(4 values)"), "{err}");
+    assert!(err.to_string().contains("(3 values)"), "{err}");
+
+    let mut b = toy_batch(&spec);
+    let s = b.push_observation(&[1.0, 0.0, 0.0]);
+    b.push(Transition {
+        observation: s,
+        action: 0,
+        reward: 0.0,
+        discount: 0.9,
+        priority: 1.0,
+        next_observation: s,
+    });
+    b.num_actions = 5;
+    let err = TrainingBatch::from_batch(&b, &[1.0], vec![0], &spec).unwrap_err();
+    assert!(err.to_string().contains("5 actions"), "{err}");
+    b.num_actions = 2;
+    b.rewards[0] = f32::NAN;
+    let err = TrainingBatch::from_batch(&b, &[1.0], vec![0], &spec).unwrap_err();
+    assert!(err.to_string().contains("rewards[0]"), "{err}");
+}
+
+#[test]
+fn divergence_is_an_error_and_the_update_is_not_applied() {
+    let spec = toy_spec(3, 2, vec![8]);
+    let chain = Chain::new();
+    let mut batch = chain.batch(&spec);
+    batch.rewards = Tensor::from_slice(&[f32::INFINITY; 6]);
+    let mut t = trainer(
+        spec,
+        OptimizerConfig::Adam {
+            lr: 0.01,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+        TargetUpdate::Period,
+    );
+    let err = t.update(&batch).unwrap_err();
+    assert!(err.to_string().contains("diverged"), "{err}");
+    assert_eq!(t.step(), 0);
+}

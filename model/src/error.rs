@@ -1,0 +1,41 @@
+//! [`ModelError`], what can go wrong building, running or loading a network.
+
+use tch::Kind;
+
+use crate::spec::NetworkSpec;
+
+/// Why a network could not be built, run or loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// A dimension, observation kind, action set or trunk is invalid.
+    #[error("invalid network spec: {0}")]
+    Spec(String),
+    /// The input does not have the expected shape.
+    #[error("expected input of shape [batch, {expected}], got {got:?}")]
+    Shape {
+        /// Features the network expects.
+        expected: i64,
+        /// Shape it got.
+        got: Vec<i64>,
+    },
+    /// The input is not f32.
+    #[error("expected f32 input, got {0:?}")]
+    Kind(Kind),
+    /// NaN or infinite values where finite ones are needed.
+    #[error("{0} holds NaN or infinite values")]
+    NonFinite(String),
+    /// Weights of another network.
+    #[error("weights are for another network: expected {expected:?}, got {got:?}")]
+    SpecMismatch {
+        /// This network's spec.
+        expected: Box<NetworkSpec>,
+        /// The weights' spec.
+        got: Box<NetworkSpec>,
+    },
+    /// The bytes are not valid weights of this format.
+    #[error("invalid weights file: {0}")]
+    Format(String),
+    /// libtorch refused.
+    #[error("libtorch: {0}")]
+    Torch(#[from] tch::TchError),
+}

@@ -1,0 +1,340 @@
+//! [`QNetwork`]: the dueling Q-network over an MLP or conv trunk, owning its
+//! variables, with the batched inference actors use and the copies the
+//! learner's target network needs.
+
+use tch::{Device, Kind, Tensor, nn, nn::Module};
+
+use crate::ModelError;
+use crate::spec::{NetworkSpec, TrunkKind};
+use crate::weights::{self, WeightsMeta};
+
+enum Trunk {
+    Mlp(Vec<nn::Linear>),
+    Conv {
+        convs: Vec<nn::Conv2D>,
+        fc: nn::Linear,
+    },
+}
+
+/// A dueling Q-network: trunk, then value V(s) and advantage A(s, a) heads,
+/// Q = V + A - mean_a A (Wang et al. 2016).
+///
+/// Variables are named `trunk.<i>.{weight,bias}` (`trunk.fc.*` after the
+/// convolutions of a conv trunk), `value.*` and `advantage.*`; these are the
+/// tensor names in the safetensors weights. Not `Sync`: one thread runs it
+/// at a time; libtorch parallelizes each call over its intra-op threads.
+pub struct QNetwork {
+    spec: NetworkSpec,
+    vs: nn::VarStore,
+    trunk: Trunk,
+    value: nn::Linear,
+    advantage: nn::Linear,
+}
+
+impl std::fmt::Debug for QNetwork {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("QNetwork")
+            .field("spec", &self.spec)
+            .field("parameters", &self.num_parameters())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Q-values of a batch from [`QNetwork::infer`], row-major
+/// `[batch][num_actions]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QBatch {
+    /// The values.
+    pub q: Vec<f32>,
+    /// Actions per row.
+    pub num_actions: usize,
+}
+
+impl QBatch {
+    /// Row `i`'s Q-values.
+    pub fn row(&self, i: usize) -> &[f32] {
+        &self.q[i * self.num_actions..(i + 1) * self.num_actions]
+    }
+
+    /// Rows in the batch.
+    pub fn len(&self) -> usize {
+        self.q.len() / self.num_actions.max(1)
+    }
+
+    /// Whether the batch has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.q.is_empty()
+    }
+
+    /// The greedy action of each row (the first of equal maxima).
+    pub fn greedy(&self) -> Vec<u32> {
+        (0..self.len())
+            .map(|i| {
+                let row = self.row(i);
+                let mut best = 0;
+                for (a, v) in row.iter().enumerate() {
+                    if *v > row[best] {
+                        best = a;
+                    }
+                }
+                best as u32
+            })
+            .collect()
+    }
+}
+
+fn conv_out(n: i64, stride: i64) -> i64 {
+    // kernel 3, padding 1
+    (n + 2 - 3) / stride + 1
+}
+
+impl QNetwork {
+    /// A network of `spec` on the CPU, initialized from `seed` (the same
+    /// seed gives the same weights).
+    pub fn new(spec: NetworkSpec, seed: u64) -> Result<Self, ModelError> {
+        spec.validate()?;
+        tch::manual_seed(seed as i64);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let root = vs.root();
+        let trunk_path = &root / "trunk";
+        let (trunk, width) = match spec.trunk {
+            TrunkKind::Mlp => {
+                let mut layers = Vec::with_capacity(spec.hidden.len());
+                let mut width = spec.input_len();
+                for (i, &h) in spec.hidden.iter().enumerate() {
+                    layers.push(nn::linear(&trunk_path / i, width, h, Default::default()));
+                    width = h;
+                }
+                (Trunk::Mlp(layers), width)
+            }
+            TrunkKind::Conv => {
+                let o = &spec.observation;
+                let (channels, fc_width) = spec.hidden.split_at(spec.hidden.len() - 1);
+                let mut convs = Vec::with_capacity(channels.len());
+                let (mut c, mut h, mut w) = (o.channels, o.rows, o.cols);
+                for (i, &out) in channels.iter().enumerate() {
+                    let stride = if i == 0 { 1 } else { 2 };
+                    let config = nn::ConvConfig {
+                        stride,
+                        padding: 1,
+                        ..Default::default()
+                    };
+                    convs.push(nn::conv2d(&trunk_path / i, c, out, 3, config));
+                    c = out;
+                    h = conv_out(h, stride);
+                    w = conv_out(w, stride);
+                }
+                let flat = c * h * w + o.extra;
+                let fc = nn::linear(&trunk_path / "fc", flat, fc_width[0], Default::default());
+                (Trunk::Conv { convs, fc }, fc_width[0])
+            }
+        };
+        let value = nn::linear(&root / "value", width, 1, Default::default());
+        let advantage = nn::linear(
+            &root / "advantage",
+            width,
+            spec.num_actions,
+            Default::default(),
+        );
+        Ok(Self {
+            spec,
+            vs,
+            trunk,
+            value,
+            advantage,
+        })
+    }
+
+    /// What this network is.
+    pub fn spec(&self) -> &NetworkSpec {
+        &self.spec
+    }
+
+    /// Its variables.
+    pub fn var_store(&self) -> &nn::VarStore {
+        &self.vs
+    }
+
+    /// Number of scalar parameters.
+    pub fn num_parameters(&self) -> i64 {
+        self.vs
+            .trainable_variables()
+            .iter()
+            .map(Tensor::numel)
+            .sum::<usize>() as i64
+    }
+
+    /// Every variable with its name, sorted by name.
+    pub fn named_variables(&self) -> Vec<(String, Tensor)> {
+        let mut v: Vec<_> = self.vs.variables().into_iter().collect();
+        v.sort_by(|a, b| a.0.cmp(&b.0));
+        v
+    }
+
+    /// Q-values `[batch, num_actions]` for observations `[batch, input]`
+    /// (f32). Records the graph for backpropagation unless called under
+    /// `tch::no_grad`.
+    pub fn q_values(&self, obs: &Tensor) -> Result<Tensor, ModelError> {
+        self.check_input(obs)?;
+        Ok(self.forward(obs))
+    }
+
+    fn check_input(&self, obs: &Tensor) -> Result<(), ModelError> {
+        let size = obs.size();
+        if size.len() != 2 || size[1] != self.spec.input_len() {
+            return Err(ModelError::Shape {
+                expected: self.spec.input_len(),
+                got: size,
+            });
+        }
+        if obs.kind() != Kind::Float {
+            return Err(ModelError::Kind(obs.kind()));
+        }
+        Ok(())
+    }
+
+    /// The two streams before they are combined: V(s) `[batch, 1]` and
+    /// A(s, a) `[batch, num_actions]`; Q = V + A - mean_a A.
+    pub fn streams(&self, obs: &Tensor) -> Result<(Tensor, Tensor), ModelError> {
+        self.check_input(obs)?;
+        let h = self.trunk_features(obs);
+        Ok((self.value.forward(&h), self.advantage.forward(&h)))
+    }
+
+    fn forward(&self, obs: &Tensor) -> Tensor {
+        let h = self.trunk_features(obs);
+        let value = self.value.forward(&h);
+        let advantage = self.advantage.forward(&h);
+        let mean = advantage.mean_dim(1, true, Kind::Float);
+        value + advantage - mean
+    }
+
+    fn trunk_features(&self, obs: &Tensor) -> Tensor {
+        match &self.trunk {
+            Trunk::Mlp(layers) => layers
+                .iter()
+                .fold(obs.shallow_clone(), |h, l| l.forward(&h).relu()),
+            Trunk::Conv { convs, fc } => {
+                let o = &self.spec.observation;
+                let batch = obs.size()[0];
+                let grid = obs
+                    .narrow(1, 0, o.grid_len())
+                    .reshape([batch, o.channels, o.rows, o.cols]);
+                let maps = convs
+                    .iter()
+                    .fold(grid, |h, conv| conv.forward(&h).relu())
+                    .flatten(1, -1);
+                let joined = if o.extra > 0 {
+                    Tensor::cat(&[maps, obs.narrow(1, o.grid_len(), o.extra)], 1)
+                } else {
+                    maps
+                };
+                fc.forward(&joined).relu()
+            }
+        }
+    }
+
+    /// Batched inference for actors: `obs` holds `batch` flat observations
+    /// back to back; returns their Q-values. Runs without recording a graph.
+    /// Fails on a wrong length and on NaN or infinite input.
+    pub fn infer(&self, obs: &[f32], batch: usize) -> Result<QBatch, ModelError> {
+        let input = self.spec.input_len() as usize;
+        if batch == 0 || obs.len() != batch * input {
+            return Err(ModelError::Shape {
+                expected: self.spec.input_len(),
+                got: vec![batch as i64, obs.len() as i64 / batch.max(1) as i64],
+            });
+        }
+        if let Some(i) = obs.iter().position(|v| !v.is_finite()) {
+            return Err(ModelError::NonFinite(format!(
+                "observation {} value {}",
+                i / input,
+                i % input
+            )));
+        }
+        let x = Tensor::from_slice(obs).reshape([batch as i64, input as i64]);
+        let q = tch::no_grad(|| self.forward(&x));
+        let q = Vec::<f32>::try_from(q.flatten(0, -1))?;
+        Ok(QBatch {
+            q,
+            num_actions: self.spec.num_actions as usize,
+        })
+    }
+
+    /// Makes this network's variables equal to `other`'s (the hard target
+    /// update). The specs must match.
+    pub fn copy_from(&mut self, other: &QNetwork) -> Result<(), ModelError> {
+        self.check_same(other)?;
+        self.vs.copy(&other.vs)?;
+        Ok(())
+    }
+
+    /// Moves every variable a fraction `tau` towards `other`'s:
+    /// `self = (1 - tau) self + tau other` (the soft target update).
+    pub fn soft_update_from(&mut self, other: &QNetwork, tau: f64) -> Result<(), ModelError> {
+        self.check_same(other)?;
+        let theirs = other.vs.variables();
+        tch::no_grad(|| {
+            for (name, mut mine) in self.vs.variables() {
+                if let Some(t) = theirs.get(&name) {
+                    let _ = mine.lerp_(t, tau);
+                }
+            }
+        });
+        Ok(())
+    }
+
+    fn check_same(&self, other: &QNetwork) -> Result<(), ModelError> {
+        if self.spec != other.spec {
+            return Err(ModelError::SpecMismatch {
+                expected: Box::new(self.spec.clone()),
+                got: Box::new(other.spec.clone()),
+            });
+        }
+        Ok(())
+    }
+
+    /// The weights as safetensors bytes, with the spec and `version` in the
+    /// file's metadata (see [`crate::weights`]).
+    pub fn to_safetensors(&self, version: u64) -> Result<Vec<u8>, ModelError> {
+        let meta = WeightsMeta {
+            version,
+            spec: self.spec.clone(),
+        };
+        weights::encode(&self.named_variables(), &meta.to_metadata()?)
+    }
+
+    /// A network built from safetensors bytes written by
+    /// [`QNetwork::to_safetensors`]; returns it and the weights' version.
+    pub fn from_safetensors(bytes: &[u8]) -> Result<(Self, u64), ModelError> {
+        let (metadata, _) = weights::decode(bytes)?;
+        let meta = WeightsMeta::from_metadata(&metadata)?;
+        let mut net = Self::new(meta.spec, 0)?;
+        let version = net.load_safetensors(bytes)?;
+        Ok((net, version))
+    }
+
+    /// Loads weights into this network; returns their version. The file's
+    /// spec must equal this network's, and its tensors must be exactly this
+    /// network's, with the same shapes and finite values; nothing changes
+    /// when any check fails.
+    pub fn load_safetensors(&mut self, bytes: &[u8]) -> Result<u64, ModelError> {
+        let (metadata, tensors) = weights::decode(bytes)?;
+        let meta = WeightsMeta::from_metadata(&metadata)?;
+        if meta.spec != self.spec {
+            return Err(ModelError::SpecMismatch {
+                expected: Box::new(self.spec.clone()),
+                got: Box::new(meta.spec),
+            });
+        }
+        self.assign(tensors)?;
+        Ok(meta.version)
+    }
+
+    /// Sets every variable from `tensors` (name, value), which must name
+    /// each variable once with its shape and hold finite values. All or
+    /// nothing.
+    pub fn assign(&mut self, tensors: Vec<(String, Tensor)>) -> Result<(), ModelError> {
+        weights::assign(&self.vs.variables(), tensors)
+    }
+}

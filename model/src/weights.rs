@@ -1,0 +1,175 @@
+//! The weights format: safetensors (readable by Python's `safetensors` and
+//! PyTorch), f32 tensors under the network's variable names, and in the
+//! file's string metadata:
+//!
+//! | key | value |
+//! | --- | --- |
+//! | `format` | `crossroads.qnetwork` |
+//! | `format_version` | [`FORMAT_VERSION`] |
+//! | `weights_version` | the learner's monotonic version, decimal |
+//! | `spec` | the [`NetworkSpec`] as JSON |
+//!
+//! [`encode`] and [`decode`] are the generic halves, also used for other
+//! named tensors (the learner's optimizer state).
+
+use std::collections::{BTreeSet, HashMap};
+
+use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use tch::{Kind, Tensor};
+
+use crate::ModelError;
+use crate::spec::NetworkSpec;
+
+/// Value of the `format` metadata key.
+pub const FORMAT: &str = "crossroads.qnetwork";
+/// Version of this layout; a reader refuses others.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// What the metadata of a weights file says.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WeightsMeta {
+    /// The learner's version of these weights.
+    pub version: u64,
+    /// The network they belong to.
+    pub spec: NetworkSpec,
+}
+
+impl WeightsMeta {
+    /// The metadata map of a file.
+    pub fn to_metadata(&self) -> Result<HashMap<String, String>, ModelError> {
+        let spec = serde_json::to_string(&self.spec)
+            .map_err(|e| ModelError::Format(format!("cannot write the spec: {e}")))?;
+        Ok(HashMap::from([
+            ("format".to_owned(), FORMAT.to_owned()),
+            ("format_version".to_owned(), FORMAT_VERSION.to_string()),
+            ("weights_version".to_owned(), self.version.to_string()),
+            ("spec".to_owned(), spec),
+        ]))
+    }
+
+    /// Reads and checks the metadata map of a file.
+    pub fn from_metadata(metadata: &HashMap<String, String>) -> Result<Self, ModelError> {
+        let get = |key: &str| {
+            metadata
+                .get(key)
+                .ok_or_else(|| ModelError::Format(format!("metadata key {key:?} is missing")))
+        };
+        if get("format")? != FORMAT {
+            return Err(ModelError::Format(format!(
+                "format is {:?}, expected {FORMAT:?}",
+                get("format")?
+            )));
+        }
+        let format_version = get("format_version")?;
+        if format_version != &FORMAT_VERSION.to_string() {
+            return Err(ModelError::Format(format!(
+                "format_version is {format_version:?}; this build reads {FORMAT_VERSION}"
+            )));
+        }
+        let version = get("weights_version")?
+            .parse::<u64>()
+            .map_err(|e| ModelError::Format(format!("weights_version is not an integer: {e}")))?;
+        let spec: NetworkSpec = serde_json::from_str(get("spec")?)
+            .map_err(|e| ModelError::Format(format!("spec: {e}")))?;
+        spec.validate()?;
+        Ok(Self { version, spec })
+    }
+}
+
+/// Serializes f32 tensors under their names, with `metadata`.
+pub fn encode(
+    tensors: &[(String, Tensor)],
+    metadata: &HashMap<String, String>,
+) -> Result<Vec<u8>, ModelError> {
+    let mut data = Vec::with_capacity(tensors.len());
+    for (name, t) in tensors {
+        if t.kind() != Kind::Float {
+            return Err(ModelError::Format(format!(
+                "tensor {name} is {:?}; only f32 is written",
+                t.kind()
+            )));
+        }
+        let values = Vec::<f32>::try_from(t.detach().contiguous().flatten(0, -1))?;
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let shape: Vec<usize> = t.size().iter().map(|&d| d as usize).collect();
+        data.push((name.clone(), shape, bytes));
+    }
+    let views = data
+        .iter()
+        .map(|(name, shape, bytes)| {
+            TensorView::new(Dtype::F32, shape.clone(), bytes).map(|v| (name.as_str(), v))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| ModelError::Format(e.to_string()))?;
+    safetensors::tensor::serialize(views, &Some(metadata.clone()))
+        .map_err(|e| ModelError::Format(e.to_string()))
+}
+
+/// Parses safetensors bytes: the metadata and every tensor (f32 only), in
+/// the file's order.
+#[allow(clippy::type_complexity)]
+pub fn decode(
+    bytes: &[u8],
+) -> Result<(HashMap<String, String>, Vec<(String, Tensor)>), ModelError> {
+    let (_, header) = SafeTensors::read_metadata(bytes)
+        .map_err(|e| ModelError::Format(format!("not a safetensors file: {e}")))?;
+    let metadata = header.metadata().clone().unwrap_or_default();
+    let file = SafeTensors::deserialize(bytes)
+        .map_err(|e| ModelError::Format(format!("not a safetensors file: {e}")))?;
+    let mut out = Vec::new();
+    for (name, view) in file.tensors() {
+        if view.dtype() != Dtype::F32 {
+            return Err(ModelError::Format(format!(
+                "tensor {name} is {:?}; expected F32",
+                view.dtype()
+            )));
+        }
+        let values: Vec<f32> = view
+            .data()
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let shape: Vec<i64> = view.shape().iter().map(|&d| d as i64).collect();
+        out.push((name, Tensor::from_slice(&values).reshape(shape)));
+    }
+    Ok((metadata, out))
+}
+
+/// Copies `tensors` into `vars` (name -> variable): every variable must be
+/// named exactly once, with its shape and finite values. Checks everything
+/// before changing anything.
+pub fn assign(
+    vars: &HashMap<String, Tensor>,
+    tensors: Vec<(String, Tensor)>,
+) -> Result<(), ModelError> {
+    let have: BTreeSet<&str> = vars.keys().map(String::as_str).collect();
+    let got: BTreeSet<&str> = tensors.iter().map(|(n, _)| n.as_str()).collect();
+    if have != got || got.len() != tensors.len() {
+        let missing: Vec<_> = have.difference(&got).collect();
+        let unknown: Vec<_> = got.difference(&have).collect();
+        return Err(ModelError::Format(format!(
+            "tensor names do not match the network: missing {missing:?}, unknown {unknown:?}"
+        )));
+    }
+    for (name, t) in &tensors {
+        let var = &vars[name];
+        if var.size() != t.size() {
+            return Err(ModelError::Format(format!(
+                "tensor {name} has shape {:?}, the network's is {:?}",
+                t.size(),
+                var.size()
+            )));
+        }
+        let finite = t.isfinite().all().int64_value(&[]) == 1;
+        if !finite {
+            return Err(ModelError::NonFinite(format!("tensor {name}")));
+        }
+    }
+    tch::no_grad(|| {
+        for (name, t) in tensors {
+            let mut var = vars[&name].shallow_clone();
+            var.copy_(&t);
+        }
+    });
+    Ok(())
+}

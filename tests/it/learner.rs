@@ -1,0 +1,308 @@
+//! `crossroads learner` and `crossroads checkpoints` as an operator runs
+//! them: real processes, a real replay server, loopback gRPC, SIGTERM, and
+//! `crossroads bench learner`.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+use crossroads_common::config::TransportConfig;
+use crossroads_common::transport::grpc::ReplayClient;
+
+/// Starts `crossroads <args>` and returns it with the `addr=` of the log
+/// line containing `ready`.
+fn spawn(args: &[&str], ready: &str) -> (Child, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["--set", "telemetry.metrics=false"])
+        .args(args)
+        .env_remove("CROSSROADS_CONFIG")
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn crossroads");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let ready = ready.to_owned();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if line.contains(&ready)
+                && let Some(addr) = line
+                    .split_whitespace()
+                    .find_map(|w| w.strip_prefix("addr="))
+            {
+                let _ = tx.send(addr.to_owned());
+            }
+        }
+    });
+    let addr = rx
+        .recv_timeout(Duration::from_secs(60))
+        .unwrap_or_else(|_| panic!("{args:?} never logged {:?}", "ready"));
+    (child, addr)
+}
+
+fn terminate(mut child: Child) {
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(status.success());
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            assert!(status.success(), "exit status {status}");
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no exit after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn checkpoints(learner: &str, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["checkpoints", "--learner", &format!("http://{learner}")])
+        .args(args)
+        .env_remove("CROSSROADS_LEARNER_TOKEN")
+        .output()
+        .expect("run crossroads checkpoints")
+}
+
+fn fill(replay: &str, config: &crossroads_common::LearnerConfig) {
+    let transport = TransportConfig {
+        replay_endpoint: format!("http://{replay}"),
+        ..TransportConfig::default()
+    };
+    let spec = crossroads_learner::TrainerConfig::from_config(config)
+        .expect("valid")
+        .spec;
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime")
+        .block_on(async {
+            let client = ReplayClient::new(&transport, "transitions")?;
+            crossroads_learner::bench::fill_replay(&client, &spec, 1_000).await
+        })
+        .expect("fill the replay");
+}
+
+fn learner_args<'a>(replay: &'a str, dir: &'a Path) -> Vec<String> {
+    vec![
+        "--set".into(),
+        "learner.observation=sequential".into(),
+        "--set".into(),
+        "learner.hidden=[32]".into(),
+        "--set".into(),
+        "learner.batch_size=16".into(),
+        "--set".into(),
+        "learner.api_token=tok3n".into(),
+        "learner".into(),
+        "--listen".into(),
+        "127.0.0.1:0".into(),
+        "--replay".into(),
+        format!("http://{replay}"),
+        "--no-shm".into(),
+        "--checkpoint-dir".into(),
+        dir.display().to_string(),
+    ]
+}
+
+#[test]
+fn learner_and_checkpoints_commands_work_together() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (replay, replay_addr) = spawn(
+        &[
+            "replay",
+            "--listen",
+            "127.0.0.1:0",
+            "--no-shm",
+            "--set",
+            "replay.min_size_to_sample=1",
+        ],
+        "replay server listening",
+    );
+    let config = crossroads_common::LearnerConfig {
+        observation: "sequential".to_owned(),
+        hidden: vec![32],
+        ..Default::default()
+    };
+    fill(&replay_addr, &config);
+
+    let ckpts = dir.path().join("ckpts");
+    let args = learner_args(&replay_addr, &ckpts);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (learner, addr) = spawn(&args, "learner listening");
+
+    let out = checkpoints(&addr, &["list"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Without the token, save is refused with a clear error.
+    let out = checkpoints(&addr, &["save"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("Unauthenticated") && err.contains("Bearer"),
+        "{err}"
+    );
+    let out = checkpoints(&addr, &["--token", "tok3n", "save", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let saved: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let id = saved["id"].as_str().expect("id").to_owned();
+
+    let out = checkpoints(&addr, &["list", "--json"]);
+    let listed: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(listed[0]["id"], id.as_str());
+    let text = checkpoints(&addr, &["list"]);
+    assert!(String::from_utf8_lossy(&text.stdout).contains(&id));
+
+    let pulled = dir.path().join("pulled");
+    let out = checkpoints(
+        &addr,
+        &["pull", &id, "--out", pulled.to_str().expect("utf-8")],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for file in [
+        "weights.safetensors",
+        "target.safetensors",
+        "optimizer.safetensors",
+        "manifest.json",
+    ] {
+        assert_eq!(
+            std::fs::read(pulled.join(&id).join(file)).expect("pulled file"),
+            std::fs::read(ckpts.join(&id).join(file)).expect("learner's file"),
+            "{file}"
+        );
+    }
+    let out = checkpoints(
+        &addr,
+        &[
+            "pull",
+            "../../etc/passwd",
+            "--out",
+            pulled.to_str().expect("utf-8"),
+        ],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("InvalidArgument"));
+    let out = checkpoints(
+        &addr,
+        &["--token", "tok3n", "restore", "ckpt-000000000000-9"],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("NotFound"));
+    let out = checkpoints(&addr, &["--token", "tok3n", "restore", &id]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("published as version"));
+
+    // SIGTERM writes a last checkpoint.
+    let before = std::fs::read_dir(&ckpts).expect("list").count();
+    terminate(learner);
+    let after = std::fs::read_dir(&ckpts).expect("list").count();
+    assert!(after > before || after == 3, "{before} -> {after}");
+    terminate(replay);
+}
+
+#[test]
+fn learner_refuses_a_bad_learner_config_naming_the_key() {
+    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args([
+            "--set",
+            "learner.optimizer=sgd",
+            "--set",
+            "learner.target_tau=0",
+        ])
+        .args(["learner", "--no-shm"])
+        .env_remove("CROSSROADS_CONFIG")
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("learner.optimizer"), "{err}");
+}
+
+#[test]
+fn bench_learner_prints_measured_figures() {
+    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args([
+            "--set",
+            "learner.hidden=[32]",
+            "--set",
+            "learner.observation=sequential",
+        ])
+        .args(["bench", "learner", "--rounds", "1", "--seconds", "0.2"])
+        .args(["--fed-updates", "20", "--no-pytorch", "--json"])
+        .env_remove("CROSSROADS_CONFIG")
+        .output()
+        .expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let rows = v["results"].as_array().expect("results");
+    assert_eq!(rows.len(), 2);
+    for (row, batch) in rows.iter().zip([64, 256]) {
+        assert_eq!(row["batch_size"], batch);
+        assert!(
+            row["updates_per_sec"].as_f64().expect("rate") > 0.0,
+            "{row}"
+        );
+        assert!(
+            row["fed_updates_per_sec"].as_f64().expect("fed rate") > 0.0,
+            "{row}"
+        );
+        let wait = row["fed_wait_fraction"].as_f64().expect("wait");
+        assert!((0.0..=1.0).contains(&wait), "{row}");
+    }
+}
+
+#[test]
+fn model_layouts_match_the_simulator_observations() {
+    use crossroads_sim::ObsKind;
+    for (kind, occlusion, name) in [
+        (ObsKind::Ttg, false, "ttg"),
+        (ObsKind::Ttg, true, "ttg-occlusion"),
+        (ObsKind::Sequential, false, "sequential"),
+        (ObsKind::Sequential, true, "sequential-occlusion"),
+    ] {
+        let sim = kind.spec(occlusion);
+        let model = crossroads_model::ObservationLayout::named(name).expect("known kind");
+        assert_eq!(
+            (model.channels, model.rows, model.cols, model.extra),
+            (
+                sim.channels as i64,
+                sim.rows as i64,
+                sim.cols as i64,
+                sim.ego_features as i64
+            ),
+            "{name}"
+        );
+        assert_eq!(model.len() as usize, sim.len());
+    }
+    for set in crossroads_sim::ActionSet::ALL {
+        assert_eq!(
+            crossroads_model::num_actions_of(set.name()).expect("known set") as usize,
+            set.num_actions()
+        );
+    }
+}
