@@ -67,6 +67,45 @@ impl<T: ActionValues + ?Sized> ActionValues for Box<T> {
     }
 }
 
+/// The Q-network drives the actor: one batched forward pass per call, no
+/// graph recorded. Its spec must fit the environments (observation length
+/// and action count); [`crate::Actor`] checks that before the first step.
+impl ActionValues for crossroads_model::QNetwork {
+    fn obs_len(&self) -> usize {
+        self.spec().input_len() as usize
+    }
+
+    fn num_actions(&self) -> usize {
+        self.spec().num_actions as usize
+    }
+
+    fn q_values(
+        &mut self,
+        observations: &[f32],
+        n: usize,
+        out: &mut [f32],
+    ) -> Result<(), ValuesError> {
+        let len = n * self.obs_len();
+        let obs = observations.get(..len).ok_or_else(|| {
+            format!(
+                "{n} observations need {len} values, got {}",
+                observations.len()
+            )
+        })?;
+        let q = self.infer(obs, n)?;
+        if out.len() < q.q.len() {
+            return Err(format!(
+                "output holds {} values, the network wrote {}",
+                out.len(),
+                q.q.len()
+            )
+            .into());
+        }
+        out[..q.q.len()].copy_from_slice(&q.q);
+        Ok(())
+    }
+}
+
 /// Index of the largest value; the first on ties, and NaN never wins
 /// (a row of NaN gives 0).
 pub fn argmax(row: &[f32]) -> usize {

@@ -135,3 +135,39 @@ fn the_index_comes_from_the_config_the_environment_or_the_host_name() {
         .expect_err("gamma");
     assert_eq!(err.problems()[0].key, "actor.gamma");
 }
+
+/// The Q-network of the learner drives an actor for every observation kind
+/// and action set: its input is exactly what the environments write, and
+/// the batches name the kind the learner checks.
+#[test]
+fn the_q_network_drives_actors_of_every_kind() {
+    use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
+    for (scenario, action_set, kind) in [
+        ("left", "ttg", "ttg"),
+        ("left", "sequential", "sequential"),
+        ("occluded-60", "creep", "ttg-occlusion"),
+        ("occluded-60", "sequential", "sequential-occlusion"),
+    ] {
+        let config = ActorConfig {
+            scenario: scenario.to_owned(),
+            action_set: action_set.to_owned(),
+            ..actor_config(3, 16)
+        };
+        let (mut a, _) = actor(&config, 0);
+        let spec = NetworkSpec::new(kind, action_set, TrunkKind::Mlp, vec![32]).expect("spec");
+        let mut net = QNetwork::new(spec, 7).expect("network");
+        let mut got = Vec::new();
+        for _ in 0..2_000 {
+            a.step(&mut net).expect("step with the network");
+            if let Some(b) = a.take_batch() {
+                got.push(b);
+                break;
+            }
+        }
+        let b = got.pop().unwrap_or_else(|| panic!("no batch for {kind}"));
+        b.validate().expect("valid batch");
+        assert_eq!(b.spec.kind, kind);
+        assert_eq!(b.num_actions as i64, net.spec().num_actions);
+        assert!(b.priorities.iter().all(|p| p.is_finite()), "{kind}");
+    }
+}
