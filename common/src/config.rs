@@ -21,6 +21,18 @@ use serde::{Deserialize, Serialize};
 pub mod actor;
 pub mod learner;
 
+/// Action set names the simulator knows (`crossroads_sim::ActionSet`; this
+/// crate does not depend on the simulator).
+pub(crate) const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
+
+/// Whether `value` is one of `allowed`, and the problem to report if not.
+pub(crate) fn one_of(value: &str, allowed: &[&str]) -> (bool, String) {
+    (
+        allowed.contains(&value),
+        format!("must be one of {}, got {value:?}", allowed.join(", ")),
+    )
+}
+
 pub use actor::{ActorConfig, ActorTransport};
 pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
 

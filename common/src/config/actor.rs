@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::{ACTION_SETS, one_of};
+
 /// How an actor sends its batches to the replay server.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -88,8 +90,6 @@ impl Default for ActorConfig {
     }
 }
 
-const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
-
 impl ActorConfig {
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
@@ -104,15 +104,8 @@ impl ActorConfig {
             "scenario",
             "must name a scenario".to_owned(),
         );
-        check(
-            ACTION_SETS.contains(&self.action_set.as_str()),
-            "action_set",
-            format!(
-                "must be one of {}, got {:?}",
-                ACTION_SETS.join(", "),
-                self.action_set
-            ),
-        );
+        let (ok, why) = one_of(&self.action_set, &ACTION_SETS);
+        check(ok, "action_set", why);
         check(
             (1..=4096).contains(&self.envs),
             "envs",

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+use super::{ACTION_SETS, one_of};
+
 /// Which optimizer trains the online network.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -169,7 +171,6 @@ impl Default for LearnerConfig {
 }
 
 const OBSERVATIONS: [&str; 4] = ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
-const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
 
 impl LearnerConfig {
     /// A copy safe to log or show: the API token replaced.
@@ -189,24 +190,10 @@ impl LearnerConfig {
                 problems.push((format!("learner.{key}"), problem));
             }
         };
-        check(
-            OBSERVATIONS.contains(&self.observation.as_str()),
-            "observation",
-            format!(
-                "must be one of {}, got {:?}",
-                OBSERVATIONS.join(", "),
-                self.observation
-            ),
-        );
-        check(
-            ACTION_SETS.contains(&self.action_set.as_str()),
-            "action_set",
-            format!(
-                "must be one of {}, got {:?}",
-                ACTION_SETS.join(", "),
-                self.action_set
-            ),
-        );
+        let (ok, why) = one_of(&self.observation, &OBSERVATIONS);
+        check(ok, "observation", why);
+        let (ok, why) = one_of(&self.action_set, &ACTION_SETS);
+        check(ok, "action_set", why);
         check(
             !self.hidden.is_empty() && self.hidden.iter().all(|&h| (1..=65_536).contains(&h)),
             "hidden",
