@@ -93,6 +93,13 @@ impl QNetwork {
     /// seed gives the same weights).
     pub fn new(spec: NetworkSpec, seed: u64) -> Result<Self, ModelError> {
         spec.validate()?;
+        // libtorch's generator is global: seeding and drawing the initial
+        // weights must not interleave with another thread's, or the same
+        // seed would not give the same weights.
+        static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let _init = INIT
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         tch::manual_seed(seed as i64);
         let vs = nn::VarStore::new(Device::Cpu);
         let root = vs.root();
