@@ -87,9 +87,20 @@ mod qnetwork {
     };
     use tch::{Kind, Tensor};
 
+    /// Observations in [0, 1) from `seed`, without libtorch's global
+    /// generator (other tests seed it concurrently).
     fn obs(spec: &NetworkSpec, batch: i64, seed: i64) -> Tensor {
-        tch::manual_seed(seed);
-        Tensor::rand([batch, spec.input_len()], (Kind::Float, tch::Device::Cpu))
+        let n = (batch * spec.input_len()) as usize;
+        let mut state = (seed as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let values: Vec<f32> = (0..n)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 40) as f32 / (1u64 << 24) as f32
+            })
+            .collect();
+        Tensor::from_slice(&values).reshape([batch, spec.input_len()])
     }
 
     fn specs() -> Vec<NetworkSpec> {
