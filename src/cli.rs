@@ -89,6 +89,132 @@ pub enum Command {
     /// Manage the learner's checkpoints over its gRPC API: list, pull,
     /// save, restore, delete.
     Checkpoints(CheckpointsArgs),
+    /// Run an actor: M simulators stepped in parallel, one batched forward
+    /// pass per step, n-step transitions pushed to the replay server.
+    ///
+    /// Explores with the Ape-X epsilon ladder from its index and the actor
+    /// count (or acts greedily with --eval, pushing nothing and reporting
+    /// episodes to the log and metrics); pushes over gRPC (any host) or
+    /// iceoryx2 (the replay's host); follows the learner's weights and acts
+    /// on the last ones while the learner is unreachable. Configured by the
+    /// [actor] and [transport] sections (the first network by [learner]),
+    /// the environment and the flags below; stops on SIGINT/SIGTERM after
+    /// delivering what it buffered.
+    Actor(ActorArgs),
+    /// Train on this machine: the replay, the learner and N actors as
+    /// separate processes over the local transport, with a progress bar,
+    /// greedy evaluations, checkpoints and a learning curve.
+    ///
+    /// Writes runs/<scenario>-<actions>/ (or --out): config.toml, logs/,
+    /// checkpoints/, replay/ (snapshot), curve.csv and curve.png (greedy
+    /// success, collisions and timeouts over time), best/ (the best
+    /// evaluated weights, usable as `eval --policy`), summary.json. Serves
+    /// crossroads_train_* on telemetry.metrics_addr. Ctrl-C stops cleanly
+    /// with a last checkpoint; --resume continues. The [train] section sets
+    /// actors, evaluations, budget and target.
+    Train(TrainArgs),
+}
+
+/// `crossroads train`. Each flag overrides the configuration key it names.
+#[derive(Debug, Clone, Args)]
+pub struct TrainArgs {
+    /// Scenario (actor.scenario; the learner follows).
+    #[arg(long, value_name = "NAME|FILE")]
+    pub scenario: Option<String>,
+    /// Action set: ttg, sequential or creep (actor.action_set; the
+    /// learner's network and observation follow).
+    #[arg(long, value_name = "SET")]
+    pub actions: Option<String>,
+    /// Actor processes (train.actors).
+    #[arg(long, value_name = "N")]
+    pub actors: Option<u32>,
+    /// Environments per actor (actor.envs).
+    #[arg(long, value_name = "M")]
+    pub envs: Option<usize>,
+    /// Update budget (learner.max_updates; 0 trains until Ctrl-C).
+    #[arg(long, value_name = "N")]
+    pub updates: Option<u64>,
+    /// Wall-clock budget in minutes (train.max_minutes).
+    #[arg(long, value_name = "MIN")]
+    pub minutes: Option<f64>,
+    /// Run folder [default: runs/<scenario>-<actions>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Continue the run in the folder: its config.toml (unless --config),
+    /// newest checkpoint, replay snapshot, curve and clocks.
+    #[arg(long)]
+    pub resume: bool,
+}
+
+/// `crossroads actor`. Each flag overrides the `[actor]` (or
+/// `[transport]`) key it names.
+#[derive(Debug, Clone, Args)]
+pub struct ActorArgs {
+    /// Scenario of the environments (actor.scenario).
+    #[arg(long, value_name = "NAME|FILE")]
+    pub scenario: Option<String>,
+    /// Action set: ttg, sequential or creep (actor.action_set).
+    #[arg(long, value_name = "SET")]
+    pub actions: Option<String>,
+    /// Environments stepped in parallel (actor.envs).
+    #[arg(long, value_name = "M")]
+    pub envs: Option<usize>,
+    /// This actor's index i for the epsilon ladder (actor.index).
+    #[arg(long, value_name = "I")]
+    pub index: Option<u32>,
+    /// Number of actors N in the run (actor.count).
+    #[arg(long, value_name = "N")]
+    pub count: Option<u32>,
+    /// How batches reach the replay: grpc or shm (actor.transport).
+    #[arg(long, value_name = "grpc|shm")]
+    pub transport: Option<String>,
+    /// How weights arrive: grpc or shm (actor.weights).
+    #[arg(long, value_name = "grpc|shm")]
+    pub weights: Option<String>,
+    /// The replay server (transport.replay_endpoint).
+    #[arg(long, value_name = "URL")]
+    pub replay: Option<String>,
+    /// The learner (transport.learner_endpoint).
+    #[arg(long, value_name = "URL")]
+    pub learner: Option<String>,
+    /// Act greedily and push nothing (actor.eval).
+    #[arg(long)]
+    pub eval: bool,
+    /// Stop after this many vectorized steps.
+    #[arg(long, value_name = "N")]
+    pub max_steps: Option<u64>,
+}
+
+impl ActorArgs {
+    /// Layers these flags over `loader`.
+    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
+        let text = [
+            ("actor.scenario", &self.scenario),
+            ("actor.action_set", &self.actions),
+            ("actor.transport", &self.transport),
+            ("actor.weights", &self.weights),
+            ("transport.replay_endpoint", &self.replay),
+            ("transport.learner_endpoint", &self.learner),
+        ];
+        for (key, value) in text {
+            if let Some(v) = value {
+                loader = loader.flag(key, v);
+            }
+        }
+        if let Some(v) = self.envs {
+            loader = loader.flag("actor.envs", v);
+        }
+        if let Some(v) = self.index {
+            loader = loader.flag("actor.index", v);
+        }
+        if let Some(v) = self.count {
+            loader = loader.flag("actor.count", v);
+        }
+        if self.eval {
+            loader = loader.flag("actor.eval", true);
+        }
+        loader
+    }
 }
 
 /// `crossroads learner`. Each flag overrides the `[learner]` (or
@@ -203,7 +329,9 @@ pub enum CheckpointsAction {
 /// A policy driving an action set on a scenario (`eval`, `render`).
 #[derive(Debug, Args)]
 pub struct PolicyArgs {
-    /// Policy: ttc:<seconds>, ttc-creep:<seconds> or random.
+    /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, or a trained
+    /// network: a checkpoint folder (runs/NAME/checkpoints/ckpt-...) or a
+    /// weights .safetensors file.
     #[arg(long, short = 'p')]
     pub policy: String,
     /// Scenario: right, left, left2, forward, challenge, occluded,
@@ -386,6 +514,39 @@ pub enum BenchTarget {
         #[arg(long, default_value_t = 1.0)]
         seconds: f64,
         /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Actor: transitions/s of one actor process, inference included, for
+    /// each environment count M and each way to the replay.
+    ///
+    /// `inproc` inserts batches into the table directly; `shm` and `grpc`
+    /// push them to a real replay server in this process over iceoryx2 and
+    /// loopback gRPC. Counts what the replay stored per second (medians of
+    /// the rounds), with env steps/s, forward passes/s and the share of
+    /// time in inference. Scenario, action set, batch size and network come
+    /// from the [actor] and [learner] sections (--set to change them).
+    Actor {
+        /// Environment counts M, comma-separated.
+        #[arg(long, default_value = "1,8,32,64", value_delimiter = ',')]
+        envs: Vec<usize>,
+        /// Ways to the replay, comma-separated: inproc, shm, grpc.
+        #[arg(
+            long = "transport",
+            default_value = "inproc,shm,grpc",
+            value_delimiter = ','
+        )]
+        transports: Vec<String>,
+        /// Timed rounds per cell; the median is reported.
+        #[arg(long, default_value_t = 5)]
+        rounds: usize,
+        /// Seconds per round.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+        /// Seconds of acting before the first round.
+        #[arg(long, default_value_t = 1.0)]
+        warmup: f64,
+        /// Print one JSON object.
         #[arg(long)]
         json: bool,
     },

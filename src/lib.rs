@@ -7,6 +7,7 @@
 
 pub mod cli;
 pub mod commands;
+pub mod network_policy;
 pub mod plot;
 pub mod progress;
 
@@ -20,6 +21,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     let loader = match &cli.command {
         Command::Replay(args) => args.apply(cli.global.loader()),
         Command::Learner(args) => args.apply(cli.global.loader()),
+        Command::Actor(args) => args.apply(cli.global.loader()),
+        Command::Train(args) => args.loader(&cli.global),
         _ => cli.global.loader(),
     };
     let config = loader.load().context("loading configuration")?;
@@ -40,5 +43,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(args) => commands::bench::run(&config, &args),
         Command::Learner(_) => commands::learner::run(&config),
         Command::Checkpoints(args) => commands::checkpoints::run(&args),
+        Command::Actor(args) => commands::actor::run(&config, &args),
+        Command::Train(args) => commands::train::run(&config, &args),
     }
 }

@@ -327,11 +327,27 @@ impl Actor {
                     p.push(batch);
                 }
             }
+            if let Some(p) = pusher {
+                self.wait_while_backlogged(p, shutdown);
+            }
         }
         if let (Some(p), Some(batch)) = (pusher, self.flush_batch()) {
             p.push(batch);
         }
         Ok(report)
+    }
+
+    /// Back-pressure: while a live replay is behind (see
+    /// [`Pusher::backlogged`]), waits instead of acting, and counts the
+    /// time.
+    fn wait_while_backlogged(&self, pusher: &Pusher, shutdown: &Shutdown) {
+        while pusher.backlogged() && !shutdown.is_triggered() {
+            let start = std::time::Instant::now();
+            std::thread::sleep(std::time::Duration::from_millis(1));
+            self.metrics
+                .backpressure_seconds
+                .inc_by(start.elapsed().as_secs_f64());
+        }
     }
 
     /// A full batch, oldest first, if one is ready.

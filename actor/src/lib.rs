@@ -15,7 +15,10 @@
 //! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`] (oldest
 //! dropped first), retrying with backoff and reconnecting.
 //! [`EpisodeStats`] sums episode ends for evaluation reports;
-//! [`ActorMetrics`] are the `crossroads_actor_*` metrics. Configuration:
+//! [`ActorMetrics`] are the `crossroads_actor_*` metrics. A
+//! [`WeightsSubscription`] receives the learner's weights (gRPC stream or
+//! iceoryx2) into a [`WeightsSlot`]; a [`LiveNetwork`] applies the newest
+//! between steps. Configuration:
 //! the `[actor]` section ([`crossroads_common::ActorConfig`]) through
 //! [`ActorSettings::from_config`] and [`resolve_index`].
 
@@ -29,6 +32,7 @@ mod push;
 mod stats;
 mod values;
 mod vec_env;
+mod weights;
 
 pub use actor::{
     Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
@@ -44,3 +48,4 @@ pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};
 pub use vec_env::{EnvStep, EpisodeEnd, VecEnv, batch_spec};
+pub use weights::{LiveNetwork, WeightsSlot, WeightsSubscription, WeightsUpdate};

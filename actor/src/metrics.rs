@@ -15,10 +15,12 @@
 //! | `crossroads_actor_push_latency_seconds` | histogram | transport | from sending a batch to its acknowledgement |
 //! | `crossroads_actor_weights_version` | gauge | | version of the weights in use |
 //! | `crossroads_actor_weights_staleness_seconds` | gauge | | age of the weights in use |
+//! | `crossroads_actor_backpressure_seconds_total` | counter | | time the acting loop waited for a live replay that was behind (its rate limiter) |
 //! | `crossroads_actor_epsilon` | gauge | | exploration epsilon (0 when greedy) |
 
 use prometheus::{
-    Gauge, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, Opts, Registry,
+    Counter, Gauge, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, Opts,
+    Registry,
 };
 
 use crate::vec_env::EpisodeEnd;
@@ -46,6 +48,8 @@ pub struct ActorMetrics {
     pub weights_staleness: Gauge,
     /// Exploration epsilon.
     pub epsilon: Gauge,
+    /// Seconds the acting loop waited for a replay that was behind.
+    pub backpressure_seconds: Counter,
 }
 
 impl ActorMetrics {
@@ -129,7 +133,12 @@ impl ActorMetrics {
             "crossroads_actor_epsilon",
             "Exploration epsilon (0 when greedy)",
         )?;
+        let backpressure_seconds = Counter::new(
+            "crossroads_actor_backpressure_seconds_total",
+            "Seconds the acting loop waited for a live replay that was behind (its rate limiter)",
+        )?;
         if let Some(r) = registry {
+            r.register(Box::new(backpressure_seconds.clone()))?;
             r.register(Box::new(env_steps.clone()))?;
             r.register(Box::new(decisions.clone()))?;
             r.register(Box::new(episodes.clone()))?;
@@ -165,6 +174,7 @@ impl ActorMetrics {
             weights_version,
             weights_staleness,
             epsilon,
+            backpressure_seconds,
         })
     }
 
@@ -180,6 +190,11 @@ impl ActorMetrics {
     pub fn stepped(&self, sim_steps: u64, decisions: u64) {
         self.env_steps.inc_by(sim_steps);
         self.decisions.inc_by(decisions);
+    }
+
+    /// Simulation steps taken so far.
+    pub fn env_steps_total(&self) -> u64 {
+        self.env_steps.get()
     }
 
     /// An episode ended (`mode`: `train` or `eval`).

@@ -73,6 +73,8 @@ impl std::fmt::Debug for Worker {
 pub struct Pusher {
     buffer: Arc<PushBuffer>,
     closing: Arc<AtomicBool>,
+    healthy: Arc<AtomicBool>,
+    high_water: usize,
     stop: Shutdown,
     worker: Option<Worker>,
 }
@@ -88,10 +90,14 @@ impl Pusher {
     ) -> Result<Self, ActorError> {
         let buffer = Arc::new(PushBuffer::new(config.buffer_batches, metrics.clone()));
         let closing = Arc::new(AtomicBool::new(false));
+        // Optimistic until a call fails, so the first batches wait for a
+        // replay that is still connecting rather than being dropped.
+        let healthy = Arc::new(AtomicBool::new(true));
         let stop = shutdown.child();
         let ctx = Ctx {
             buffer: Arc::clone(&buffer),
             closing: Arc::clone(&closing),
+            healthy: Arc::clone(&healthy),
             stop: stop.clone(),
             metrics,
             connection: config.connection.clone(),
@@ -115,6 +121,8 @@ impl Pusher {
         Ok(Self {
             buffer,
             closing,
+            healthy,
+            high_water: config.in_flight.max(1),
             stop,
             worker: Some(worker),
         })
@@ -126,6 +134,15 @@ impl Pusher {
         if !batch.is_empty() {
             self.buffer.push(batch);
         }
+    }
+
+    /// Whether the replay answers but takes batches more slowly than they
+    /// come (its rate limiter holds inserts back): more than `in_flight`
+    /// batches wait and the last call succeeded. The acting loop then
+    /// waits instead of filling the buffer; an unreachable replay is not
+    /// backlogged, so the actor acts on and the buffer drops the oldest.
+    pub fn backlogged(&self) -> bool {
+        self.healthy.load(Ordering::Relaxed) && self.buffer.len() > self.high_water
     }
 
     /// Batches waiting to be sent.
@@ -182,6 +199,8 @@ impl Drop for Pusher {
 struct Ctx {
     buffer: Arc<PushBuffer>,
     closing: Arc<AtomicBool>,
+    /// The last call succeeded (cleared by a failure).
+    healthy: Arc<AtomicBool>,
     stop: Shutdown,
     metrics: ActorMetrics,
     connection: TransportConfig,
@@ -250,6 +269,7 @@ async fn grpc_worker(ctx: Ctx, client: ReplayClient) {
                             done.at.elapsed().as_secs_f64(),
                         );
                     }
+                    ctx.healthy.store(true, Ordering::Relaxed);
                     backoff.reset();
                 }
                 Err(e) => {
@@ -276,6 +296,7 @@ async fn grpc_worker(ctx: Ctx, client: ReplayClient) {
 /// go back to the buffer; then a backoff.
 async fn grpc_failed(ctx: &Ctx, e: &ClientError, sent: &mut VecDeque<Sent>, backoff: &mut Backoff) {
     ctx.metrics.retry("grpc");
+    ctx.healthy.store(false, Ordering::Relaxed);
     if !e.is_retryable()
         && let Some(bad) = sent.pop_front()
     {
@@ -331,6 +352,7 @@ fn shm_worker(ctx: Ctx) {
                                 u64::from(inserted),
                                 done.at.elapsed().as_secs_f64(),
                             );
+                            ctx.healthy.store(true, Ordering::Relaxed);
                             backoff.reset();
                         }
                         Err(reason) => {
@@ -357,6 +379,7 @@ fn shm_worker(ctx: Ctx) {
                 "batches unacknowledged after {ack_timeout:?}; sending them again"
             );
             ctx.metrics.retry("shm");
+            ctx.healthy.store(false, Ordering::Relaxed);
             ctx.buffer.requeue(sent.drain(..).map(|(_, s)| s.batch));
         }
         if sent.len() >= ctx.in_flight {
@@ -419,6 +442,7 @@ fn shm_worker(ctx: Ctx) {
 
 fn shm_failed(ctx: &Ctx, e: &ShmError, backoff: &mut Backoff) {
     ctx.metrics.retry("shm");
+    ctx.healthy.store(false, Ordering::Relaxed);
     let delay = backoff.next_delay();
     if backoff.attempts() <= 1 || backoff.attempts().is_power_of_two() {
         tracing::warn!(error = %e, attempts = backoff.attempts(), retry_in = ?delay, buffered = ctx.buffer.len(), "replay server unreachable over shared memory; buffering");

@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod actor;
 pub mod learner;
+pub mod train;
 
 /// Action set names the simulator knows (`crossroads_sim::ActionSet`; this
 /// crate does not depend on the simulator).
@@ -35,6 +36,7 @@ pub(crate) fn one_of(value: &str, allowed: &[&str]) -> (bool, String) {
 
 pub use actor::{ActorConfig, ActorTransport};
 pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
+pub use train::TrainConfig;
 
 const DEFAULTS: &str = "defaults";
 const COMMAND_LINE: &str = "command line";
@@ -61,6 +63,8 @@ pub struct Config {
     /// The learner: network, optimizer, targets, weight broadcast and
     /// checkpoints.
     pub learner: LearnerConfig,
+    /// `crossroads train`: actors started, evaluations, budget, target.
+    pub train: TrainConfig,
 }
 
 /// Threads of the process.
@@ -220,6 +224,9 @@ pub struct TransportConfig {
     /// The replay server as clients (actors, learner) reach it, e.g.
     /// `http://replay:50051`.
     pub replay_endpoint: String,
+    /// The learner's gRPC service as actors reach it for weights, e.g.
+    /// `http://learner:50052`.
+    pub learner_endpoint: String,
     /// Longest wait for a connection, milliseconds.
     pub connect_timeout_ms: u64,
     /// Longest wait for an answer to a unary call, milliseconds.
@@ -249,6 +256,7 @@ impl Default for TransportConfig {
     fn default() -> Self {
         Self {
             replay_endpoint: "http://127.0.0.1:50051".to_owned(),
+            learner_endpoint: "http://127.0.0.1:50052".to_owned(),
             connect_timeout_ms: 5_000,
             request_timeout_ms: 30_000,
             initial_backoff_ms: 100,
@@ -361,14 +369,16 @@ impl Config {
         );
 
         let t = &self.transport;
-        check(
-            t.replay_endpoint.starts_with("http://") || t.replay_endpoint.starts_with("https://"),
-            "transport.replay_endpoint",
-            format!(
-                "must be an http:// or https:// URL, got {:?}",
-                t.replay_endpoint
-            ),
-        );
+        for (key, url) in [
+            ("transport.replay_endpoint", &t.replay_endpoint),
+            ("transport.learner_endpoint", &t.learner_endpoint),
+        ] {
+            check(
+                url.starts_with("http://") || url.starts_with("https://"),
+                key,
+                format!("must be an http:// or https:// URL, got {url:?}"),
+            );
+        }
         for (key, value) in [
             ("transport.connect_timeout_ms", t.connect_timeout_ms),
             ("transport.request_timeout_ms", t.request_timeout_ms),
@@ -421,6 +431,7 @@ impl Config {
         );
         problems.extend(self.actor.validate());
         problems.extend(self.learner.validate());
+        problems.extend(self.train.validate());
         problems
     }
 

@@ -38,7 +38,7 @@ pub use batch::{
 pub use codec::ObservationEncoding;
 pub use config::{
     ActorConfig, ActorTransport, Config, ConfigError, ConfigLoader, ConfigProblem, LearnerConfig,
-    LogFormat, ReplayConfig, TransportConfig, WeightNormalization,
+    LogFormat, ReplayConfig, TrainConfig, TransportConfig, WeightNormalization,
 };
 pub use metrics::MetricsServer;
 pub use retry::Backoff;

@@ -39,6 +39,46 @@ pub enum MetricsError {
     Register(#[from] prometheus::Error),
 }
 
+/// Reads `http://addr/metrics` and returns the exposition text; every step
+/// (connect, answer, body) is bounded by `timeout`. For tools that watch
+/// other processes, like `crossroads train`.
+pub async fn scrape(addr: SocketAddr, timeout: std::time::Duration) -> Result<String, String> {
+    use http_body_util::{BodyExt, Empty};
+    let fetch = async {
+        let stream = tokio::net::TcpStream::connect(addr)
+            .await
+            .map_err(|e| format!("connecting: {e}"))?;
+        let (mut sender, conn) = hyper::client::conn::http1::handshake(TokioIo::new(stream))
+            .await
+            .map_err(|e| format!("handshake: {e}"))?;
+        tokio::spawn(conn);
+        let req = Request::get("/metrics")
+            .header("host", addr.to_string())
+            .body(Empty::<Bytes>::new())
+            .map_err(|e| e.to_string())?;
+        let resp = sender
+            .send_request(req)
+            .await
+            .map_err(|e| format!("request: {e}"))?;
+        if resp.status() != StatusCode::OK {
+            return Err(format!("status {}", resp.status()));
+        }
+        let body = resp
+            .into_body()
+            .collect()
+            .await
+            .map_err(|e| format!("body: {e}"))?
+            .to_bytes();
+        String::from_utf8(body.to_vec()).map_err(|e| format!("body is not UTF-8: {e}"))
+    };
+    match tokio::time::timeout(timeout, fetch).await {
+        Ok(r) => r.map_err(|e| format!("scraping http://{addr}/metrics: {e}")),
+        Err(_) => Err(format!(
+            "scraping http://{addr}/metrics: no answer within {timeout:?}"
+        )),
+    }
+}
+
 /// A fresh registry holding the process-wide metrics of `role` (`replay`,
 /// `learner`, `actor`, `train`, ...).
 pub fn registry(role: &str) -> Result<Registry, MetricsError> {

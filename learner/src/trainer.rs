@@ -2,7 +2,7 @@
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
 
 use crossroads_common::config::{LearnerConfig, TargetUpdate, Trunk};
-use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
+use crossroads_model::{ModelError, NetworkSpec, QNetwork, TrunkKind};
 use tch::{Kind, Tensor};
 
 use crate::LearnerError;
@@ -36,13 +36,8 @@ pub struct TrainerConfig {
 impl TrainerConfig {
     /// The trainer `[learner]` describes; fails on an invalid network.
     pub fn from_config(c: &LearnerConfig) -> Result<Self, LearnerError> {
-        let trunk = match c.trunk {
-            Trunk::Mlp => TrunkKind::Mlp,
-            Trunk::Conv => TrunkKind::Conv,
-        };
-        let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
         Ok(Self {
-            spec: NetworkSpec::new(&c.observation, &c.action_set, trunk, hidden)?,
+            spec: network_spec(c)?,
             seed: c.seed,
             optimizer: OptimizerConfig::from_config(c),
             max_grad_norm: c.max_grad_norm,
@@ -53,6 +48,17 @@ impl TrainerConfig {
             priority_eps: c.priority_eps,
         })
     }
+}
+
+/// The network `[learner]` describes (observation, action set, trunk,
+/// hidden sizes); actors build their first network from it too.
+pub fn network_spec(c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
+    let trunk = match c.trunk {
+        Trunk::Mlp => TrunkKind::Mlp,
+        Trunk::Conv => TrunkKind::Conv,
+    };
+    let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
+    NetworkSpec::new(&c.observation, &c.action_set, trunk, hidden)
 }
 
 /// What one update measured.

@@ -8,6 +8,7 @@ use crossroads_sim::bench_builtin;
 
 use crate::cli::{BenchArgs, BenchTarget};
 
+mod actor;
 mod learner;
 
 /// Runs the chosen measurement and prints its figures.
@@ -32,6 +33,24 @@ pub fn run(config: &Config, args: &BenchArgs) -> anyhow::Result<ExitCode> {
                 fed_updates: *fed_updates,
                 python: python.clone(),
                 pytorch: !*no_pytorch,
+                json: *json,
+            },
+        ),
+        BenchTarget::Actor {
+            envs,
+            transports,
+            rounds,
+            seconds,
+            warmup,
+            json,
+        } => actor::run(
+            config,
+            &actor::Options {
+                envs: envs.clone(),
+                transports: transports.clone(),
+                rounds: *rounds,
+                seconds: *seconds,
+                warmup: *warmup,
                 json: *json,
             },
         ),
@@ -87,4 +106,25 @@ fn replay(capacity: usize, rounds: usize, json: bool) {
         println!("  inserts/s (median, batch 64)  {:.0}", r.inserts_per_sec);
         println!("  samples/s (median, batch 256) {:.0}", r.samples_per_sec);
     }
+}
+
+/// The middle value (mean of the two middle ones for an even count); 0 for
+/// none.
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    match s.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => s[n / 2],
+        n => (s[n / 2 - 1] + s[n / 2]) / 2.0,
+    }
+}
+
+/// The one-minute load average, to print beside figures measured on a
+/// shared machine; empty when unknown.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().map(str::to_owned))
+        .unwrap_or_default()
 }

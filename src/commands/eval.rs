@@ -1,13 +1,17 @@
 //! `crossroads eval`: a policy on a scenario for N seeded trials.
 
+use std::path::Path;
 use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::Context;
-use crossroads_sim::{EvalConfig, EvalReport, Interval, Policy, Scenario, evaluate, parse_policy};
+use crossroads_sim::{
+    Env, EnvConfig, EvalConfig, EvalReport, Interval, Policy, Scenario, evaluate, parse_policy,
+};
 use serde::Serialize;
 
 use crate::cli::{EvalArgs, PolicyArgs};
+use crate::network_policy::NetworkPolicy;
 use crate::progress;
 
 /// What `--json` prints: the fields first, then the intervals.
@@ -37,7 +41,21 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<(Arc<Scenario>, Box<dyn Policy>
     let scenario = Arc::new(
         Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
     );
-    let policy = parse_policy(&args.policy).context("--policy")?;
+    let policy: Box<dyn Policy> = match NetworkPolicy::load(Path::new(&args.policy))
+        .with_context(|| format!("--policy {}", args.policy))?
+    {
+        Some(net) => {
+            net.fits(&Env::new(
+                Arc::clone(&scenario),
+                EnvConfig::for_actions(args.actions),
+            ))
+            .with_context(|| format!("--policy {}", args.policy))?;
+            Box::new(net)
+        }
+        None => parse_policy(&args.policy).context(
+            "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s> or random)",
+        )?,
+    };
     policy.supports(args.actions).with_context(|| {
         format!(
             "--policy {} with --actions {}",

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod actor;
 pub mod bench;
 pub mod checkpoints;
 pub mod config;
@@ -8,4 +9,6 @@ pub mod eval;
 pub mod learner;
 pub mod render;
 pub mod replay;
+pub mod role;
+pub mod train;
 pub mod tune_ttc;

@@ -5,3 +5,4 @@ mod nstep;
 mod push;
 mod util;
 mod vec_env;
+mod weights;

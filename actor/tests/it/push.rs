@@ -228,3 +228,55 @@ async fn the_acting_loop_delivers_every_transition_it_assembles() {
     shutdown.trigger();
     server.join().await.expect("clean stop");
 }
+
+/// A replay that answers but holds inserts back (its rate limiter, with
+/// nobody sampling) slows the acting loop down: it waits, counts the wait,
+/// and drops nothing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rate_limited_replay_slows_the_actor_instead_of_losing_batches() {
+    let shutdown = Shutdown::new();
+    let mut config = replay_config("127.0.0.1:0", None);
+    config.replay.min_size_to_sample = 100;
+    config.replay.samples_per_insert = 1.0;
+    config.replay.rate_tolerance = 200.0;
+    let server = crossroads_replay::start(&config, None, shutdown.clone())
+        .await
+        .expect("replay");
+    let endpoint = format!("http://{}", server.local_addr());
+    let (mut a, mut v) = actor(&actor_config(4, 24), 0);
+    let metrics = a.metrics().clone();
+    let pusher = Pusher::start(
+        &push_config(ActorTransport::Grpc, &endpoint, "unused", 64),
+        metrics.clone(),
+        &shutdown,
+    )
+    .expect("pusher");
+    let stop = Shutdown::new();
+    let acting_stop = stop.clone();
+    let acting = tokio::task::spawn_blocking(move || {
+        let report = a.run(&mut v, Some(&pusher), &acting_stop, None);
+        (report, pusher)
+    });
+    let table = server.table("t").expect("table");
+    eventually(
+        Duration::from_secs(30),
+        "the replay to hold inserts back",
+        || metrics.backpressure_seconds.get() > 1.0,
+    )
+    .await;
+    let held = table.stats().size;
+    assert!(held <= 100 + 200 + 24, "the rate limiter let {held} in");
+    let steps = metrics.env_steps_total();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(
+        metrics.env_steps_total() < steps + 200,
+        "the actor kept acting while the replay was behind"
+    );
+    stop.trigger();
+    let (report, pusher) = acting.await.expect("acting thread");
+    report.expect("run");
+    assert_eq!(metrics.dropped_total("buffer_full"), 0);
+    drop(pusher);
+    shutdown.trigger();
+    server.join().await.expect("clean stop");
+}

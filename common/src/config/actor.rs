@@ -61,6 +61,11 @@ pub struct ActorConfig {
     pub eval: bool,
     /// `grpc` or `shm`.
     pub transport: ActorTransport,
+    /// How newer weights reach the actor: `grpc` (the learner's
+    /// SubscribeWeights stream at `transport.learner_endpoint`, any host)
+    /// or `shm` (the learner's iceoryx2 broadcast, its host only). Unset:
+    /// the same as `transport`.
+    pub weights: Option<ActorTransport>,
     /// Batches kept while the replay server is unreachable; beyond it the
     /// oldest are dropped (and counted). At least 1.
     pub buffer_batches: usize,
@@ -84,6 +89,7 @@ impl Default for ActorConfig {
             epsilon_alpha: 7.0,
             eval: false,
             transport: ActorTransport::Grpc,
+            weights: None,
             buffer_batches: 256,
             in_flight: 4,
         }
@@ -91,6 +97,11 @@ impl Default for ActorConfig {
 }
 
 impl ActorConfig {
+    /// How weights arrive: `weights`, else `transport`.
+    pub fn weights_transport(&self) -> ActorTransport {
+        self.weights.unwrap_or(self.transport)
+    }
+
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Vec::new();

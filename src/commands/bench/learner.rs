@@ -135,10 +135,7 @@ async fn fed_runs(config: &Config, o: &Options) -> anyhow::Result<Vec<(u32, FedR
 /// Measures and prints.
 pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     tch::set_num_threads(o.threads as i32);
-    let load = std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().map(str::to_owned))
-        .unwrap_or_default();
+    let load = super::load_average();
     let round = Duration::from_secs_f64(o.seconds.max(0.1));
 
     let mut memory = Vec::new();

@@ -1,0 +1,297 @@
+//! `crossroads bench actor`: transitions per second of one actor process,
+//! inference included, for several environment counts M and three ways to
+//! the replay: in-process (batches inserted into the table directly),
+//! iceoryx2 shared memory and gRPC (both to a real replay server running
+//! in this process, on loopback).
+//!
+//! An actor steps continuously; every `seconds` the transitions the replay
+//! has stored since the last mark are counted, so a transport slower than
+//! the actor shows as a lower rate (and as dropped batches once the push
+//! buffer is full), not as a backlog that is never timed.
+
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use crossroads_actor::{
+    ActionValues, Actor, ActorMetrics, ActorSettings, PushConfig, Pusher, hostname,
+};
+use crossroads_common::{ActorTransport, Config, Shutdown};
+use crossroads_model::QNetwork;
+use crossroads_replay::{PreparedBatch, Table};
+use serde::Serialize;
+
+use super::{load_average, median};
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Environment counts M.
+    pub envs: Vec<usize>,
+    /// Transports: `inproc`, `shm`, `grpc`.
+    pub transports: Vec<String>,
+    /// Timed rounds per cell; the median is reported.
+    pub rounds: usize,
+    /// Seconds per round.
+    pub seconds: f64,
+    /// Seconds of warm-up before the first round.
+    pub warmup: f64,
+    /// Print JSON.
+    pub json: bool,
+}
+
+/// One cell of the table.
+#[derive(Debug, Clone, Serialize)]
+struct Cell {
+    transport: String,
+    envs: usize,
+    transitions_per_sec: f64,
+    env_steps_per_sec: f64,
+    forward_passes_per_sec: f64,
+    inference_fraction: f64,
+    dropped: u64,
+    rounds: Vec<f64>,
+}
+
+/// A network that times its forward passes.
+struct Timed {
+    net: QNetwork,
+    busy: Duration,
+    calls: u64,
+}
+
+impl ActionValues for Timed {
+    fn obs_len(&self) -> usize {
+        ActionValues::obs_len(&self.net)
+    }
+
+    fn num_actions(&self) -> usize {
+        ActionValues::num_actions(&self.net)
+    }
+
+    fn q_values(
+        &mut self,
+        observations: &[f32],
+        n: usize,
+        out: &mut [f32],
+    ) -> Result<(), crossroads_actor::ValuesError> {
+        let start = Instant::now();
+        let r = ActionValues::q_values(&mut self.net, observations, n, out);
+        self.busy += start.elapsed();
+        self.calls += 1;
+        r
+    }
+}
+
+/// Where the acting thread puts its batches.
+enum Sink {
+    Table(Arc<Table>),
+    Pusher(Pusher),
+}
+
+/// Measures and prints.
+pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
+    for t in &o.transports {
+        anyhow::ensure!(
+            matches!(t.as_str(), "inproc" | "shm" | "grpc"),
+            "unknown transport {t:?}: choose from inproc, shm, grpc"
+        );
+    }
+    anyhow::ensure!(
+        o.envs.iter().all(|&m| (1..=4096).contains(&m)),
+        "--envs must each be between 1 and 4096"
+    );
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let mut cells = Vec::new();
+    for transport in &o.transports {
+        for &m in &o.envs {
+            let cell = runtime
+                .block_on(measure(config, o, transport, m))
+                .with_context(|| format!("{transport}, M = {m}"))?;
+            if !o.json {
+                eprintln!(
+                    "  {transport:<7} M = {m:<3} {:>9.0} transitions/s",
+                    cell.transitions_per_sec
+                );
+            }
+            cells.push(cell);
+        }
+    }
+    let spec = crossroads_learner::network_spec(&config.learner)?;
+    let network = format!(
+        "dueling {} {}-{} -> {}",
+        spec.trunk.name(),
+        spec.input_len(),
+        spec.hidden
+            .iter()
+            .map(|h| h.to_string())
+            .collect::<Vec<_>>()
+            .join("-"),
+        spec.num_actions
+    );
+    let load = load_average();
+    if o.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "scenario": config.actor.scenario,
+                "action_set": config.actor.action_set,
+                "network": network,
+                "batch_size": config.actor.batch_size,
+                "n_step": config.actor.n_step,
+                "rayon_threads": rayon::current_num_threads(),
+                "torch_threads": tch::get_num_threads(),
+                "rounds": o.rounds,
+                "seconds": o.seconds,
+                "load_average": load,
+                "host": hostname(),
+                "results": cells,
+            })
+        );
+    } else {
+        println!(
+            "actor throughput on {} ({} actions), {network}, batches of {}, {}-step; rayon {} threads, libtorch {}; median of {} rounds of {:.1} s (load average {load})",
+            config.actor.scenario,
+            config.actor.action_set,
+            config.actor.batch_size,
+            config.actor.n_step,
+            rayon::current_num_threads(),
+            tch::get_num_threads(),
+            o.rounds,
+            o.seconds,
+        );
+        println!(
+            "transport    M  transitions/s  env steps/s  forward passes/s  inference  dropped"
+        );
+        for c in &cells {
+            println!(
+                "{:<9} {:>4}  {:>13.0}  {:>11.0}  {:>16.0}  {:>8.0}%  {:>7}",
+                c.transport,
+                c.envs,
+                c.transitions_per_sec,
+                c.env_steps_per_sec,
+                c.forward_passes_per_sec,
+                100.0 * c.inference_fraction,
+                c.dropped
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> anyhow::Result<Cell> {
+    let mut c = config.clone();
+    c.replay.listen = ([127, 0, 0, 1], 0).into();
+    c.replay.snapshot_dir = None;
+    c.replay.samples_per_insert = 0.0;
+    c.replay.capacity = c.replay.capacity.max(1 << 20);
+    c.replay.shm_ingest = transport == "shm";
+    c.transport.shm_prefix = format!("crossroads-bench/actor-{}-{m}", std::process::id());
+    c.actor.envs = m;
+    let servers = Shutdown::new();
+    let server = crossroads_replay::start(&c, None, servers.clone())
+        .await
+        .context("starting a replay server")?;
+    c.transport.replay_endpoint = format!("http://{}", server.local_addr());
+    let table = server
+        .table(&c.replay.table)
+        .context("the replay server has no table")?;
+
+    let metrics = ActorMetrics::new(None, &c.actor.scenario)?;
+    let settings = ActorSettings::from_config(&c.actor, 0)?;
+    let mut actor = Actor::new(settings, metrics.clone())?;
+    let spec = crossroads_learner::network_spec(&c.learner)?;
+    let mut net = Timed {
+        net: QNetwork::new(spec, c.learner.seed)?,
+        busy: Duration::ZERO,
+        calls: 0,
+    };
+    let sink = match transport {
+        "inproc" => Sink::Table(Arc::clone(&table)),
+        kind => {
+            c.actor.transport = if kind == "shm" {
+                ActorTransport::Shm
+            } else {
+                ActorTransport::Grpc
+            };
+            Sink::Pusher(Pusher::start(
+                &PushConfig::from_config(&c),
+                metrics.clone(),
+                &servers,
+            )?)
+        }
+    };
+
+    let stop = Shutdown::new();
+    let acting_stop = stop.clone();
+    let marks = Arc::new(Mutex::new((Duration::ZERO, 0u64)));
+    let acting_marks = Arc::clone(&marks);
+    let acting = tokio::task::spawn_blocking(move || -> anyhow::Result<Sink> {
+        while !acting_stop.is_triggered() {
+            actor.step(&mut net)?;
+            while let Some(batch) = actor.take_batch() {
+                match &sink {
+                    Sink::Table(t) => {
+                        t.insert_now(&PreparedBatch::new(batch)?)?;
+                    }
+                    Sink::Pusher(p) => p.push(batch),
+                }
+            }
+            *lock(&acting_marks) = (net.busy, net.calls);
+        }
+        Ok(sink)
+    });
+
+    tokio::time::sleep(Duration::from_secs_f64(o.warmup.max(0.0))).await;
+    let round = Duration::from_secs_f64(o.seconds.max(0.1));
+    let mut rates = Vec::new();
+    let mut steps = Vec::new();
+    let mut passes = Vec::new();
+    let mut inference = Vec::new();
+    let dropped0 = metrics.dropped_total("buffer_full");
+    for _ in 0..o.rounds.max(1) {
+        let (t0, i0, s0, (b0, c0)) = (
+            Instant::now(),
+            table.stats().inserts_total,
+            metrics.env_steps_total(),
+            *lock(&marks),
+        );
+        tokio::time::sleep(round).await;
+        if acting.is_finished() {
+            break;
+        }
+        let dt = t0.elapsed().as_secs_f64();
+        let (b1, c1) = *lock(&marks);
+        rates.push((table.stats().inserts_total - i0) as f64 / dt);
+        steps.push((metrics.env_steps_total() - s0) as f64 / dt);
+        passes.push((c1 - c0) as f64 / dt);
+        inference.push((b1 - b0).as_secs_f64() / dt);
+    }
+    stop.trigger();
+    let sink = acting.await.context("the acting thread")??;
+    anyhow::ensure!(!rates.is_empty(), "the acting thread stopped early");
+    if let Sink::Pusher(p) = sink {
+        p.close(Duration::from_secs(5)).await;
+    }
+    servers.trigger();
+    server.join().await.context("replay server")?;
+    Ok(Cell {
+        transport: transport.to_owned(),
+        envs: m,
+        transitions_per_sec: median(&rates),
+        env_steps_per_sec: median(&steps),
+        forward_passes_per_sec: median(&passes),
+        inference_fraction: median(&inference),
+        dropped: metrics.dropped_total("buffer_full") - dropped0,
+        rounds: rates,
+    })
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}

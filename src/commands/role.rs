@@ -1,0 +1,73 @@
+//! What `crossroads replay`, `learner` and `actor` share: the async
+//! runtime, signal handling, the process's metrics registry and its
+//! `/metrics` endpoint.
+
+use std::process::ExitCode;
+
+use anyhow::Context;
+use crossroads_common::metrics::registry;
+use crossroads_common::{Config, MetricsServer, Shutdown};
+use prometheus::Registry;
+
+/// Runs `serve` on a multi-threaded runtime of `runtime.worker_threads`.
+pub fn block_on(
+    config: &Config,
+    serve: impl Future<Output = anyhow::Result<()>>,
+) -> anyhow::Result<ExitCode> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(config.runtime.worker_threads)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(serve)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A role's process-wide parts: the shutdown signal (SIGINT/SIGTERM), the
+/// metrics registry, and the `/metrics` endpoint when
+/// `telemetry.metrics` is on. Must be made inside the runtime.
+#[derive(Debug)]
+pub struct Role {
+    /// Fired by a signal or by [`finish`](Self::finish).
+    pub shutdown: Shutdown,
+    /// The registry the role's metrics go into.
+    pub registry: Registry,
+    endpoint: Option<MetricsServer>,
+}
+
+impl Role {
+    /// Installs the signal handlers, makes the registry of `name` and
+    /// serves it on `telemetry.metrics_addr`.
+    pub async fn start(config: &Config, name: &str) -> anyhow::Result<Self> {
+        let shutdown = Shutdown::on_signals().context("installing signal handlers")?;
+        let registry = registry(name)?;
+        let endpoint = if config.telemetry.metrics {
+            Some(
+                MetricsServer::start(
+                    config.telemetry.metrics_addr,
+                    registry.clone(),
+                    shutdown.clone(),
+                )
+                .await
+                .context("starting the metrics endpoint")?,
+            )
+        } else {
+            None
+        };
+        Ok(Self {
+            shutdown,
+            registry,
+            endpoint,
+        })
+    }
+
+    /// Stops what is left (the role may also end alone: an error, a step
+    /// budget) and waits for the endpoint; returns `result`.
+    pub async fn finish(self, result: anyhow::Result<()>) -> anyhow::Result<()> {
+        self.shutdown.trigger();
+        if let Some(m) = self.endpoint {
+            m.join().await;
+        }
+        result
+    }
+}
