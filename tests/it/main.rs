@@ -6,3 +6,4 @@ mod learner;
 mod replay;
 mod setup_libtorch;
 mod sim_commands;
+mod train;

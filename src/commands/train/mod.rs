@@ -212,9 +212,16 @@ impl Addresses {
         })
     }
 
-    /// The variables every role gets (they override the file).
+    /// The variables every role gets (they override the file). The roles
+    /// share this machine's cores, so libgomp's threads sleep instead of
+    /// spinning while they wait (unless the user chose otherwise): spinning
+    /// threads of one role starve the others.
     fn env(&self) -> Vec<(String, String)> {
-        vec![
+        let mut env = Vec::new();
+        if std::env::var_os("OMP_WAIT_POLICY").is_none() {
+            env.push(("OMP_WAIT_POLICY".into(), "passive".into()));
+        }
+        env.extend([
             ("CROSSROADS_REPLAY__LISTEN".into(), self.replay.to_string()),
             (
                 "CROSSROADS_TRANSPORT__REPLAY_ENDPOINT".into(),
@@ -232,7 +239,8 @@ impl Addresses {
                 "CROSSROADS_TRANSPORT__SHM_PREFIX".into(),
                 self.shm_prefix.clone(),
             ),
-        ]
+        ]);
+        env
     }
 }
 
@@ -449,7 +457,8 @@ impl Session {
         let c = self.run.config.clone();
         let budget = c.learner.max_updates;
         let bar = progress_bar(budget);
-        let mut next_eval = c.train.eval_every;
+        // The first evaluation is of the weights the run starts from.
+        let mut next_eval = 0;
         let mut rate = (Instant::now(), self.run.previous.env_steps);
         let mut steps_per_s = 0.0;
         let mut last_eval = "no evaluation yet".to_owned();
@@ -459,7 +468,9 @@ impl Session {
                 _ = tick.tick() => {}
                 () = shutdown.wait() => break End::Signal,
             }
-            self.check_roles()?;
+            if self.check_roles()? {
+                break End::Budget;
+            }
             if let Ok(st) = self.learner_client.status().await {
                 self.updates = st.update_step;
                 self.loss = st.loss;
@@ -518,13 +529,15 @@ impl Session {
         Ok(end)
     }
 
-    /// An error naming the role that ended on its own (with its log's end);
-    /// the learner ending at its budget is not one.
-    fn check_roles(&mut self) -> anyhow::Result<()> {
+    /// An error naming the role that ended on its own (with its log's
+    /// end); `true` when the learner ended at its update budget.
+    fn check_roles(&mut self) -> anyhow::Result<bool> {
         let budget = self.run.config.learner.max_updates;
-        if let Some(status) = self.learner.exited()
-            && !(status.success() && budget > 0)
-        {
+        if let Some(status) = self.learner.exited() {
+            if status.success() && budget > 0 {
+                self.updates = self.updates.max(budget);
+                return Ok(true);
+            }
             return Err(died(&self.learner, status));
         }
         if let Some(status) = self.replay.exited() {
@@ -535,7 +548,7 @@ impl Session {
                 return Err(died(a, status));
             }
         }
-        Ok(())
+        Ok(false)
     }
 
     /// Simulation steps of all actors, from their `/metrics`.
@@ -555,15 +568,18 @@ impl Session {
     /// `trials` trials of the run's scenario; records and reports the
     /// result.
     async fn evaluate_latest(&mut self, trials: u64) -> anyhow::Result<Evaluation> {
-        let weights = self
-            .learner_client
-            .latest_weights()
-            .await
-            .context("fetching the latest weights")?;
-        let e = self
-            .evaluate_bytes(&weights.safetensors, weights.version, trials)
-            .await?;
-        self.record(&e, &weights.safetensors)?;
+        let (version, safetensors) = if self.learner.exited().is_none() {
+            let w = self
+                .learner_client
+                .latest_weights()
+                .await
+                .context("fetching the latest weights")?;
+            (w.version, w.safetensors)
+        } else {
+            self.newest_checkpoint()?
+        };
+        let e = self.evaluate_bytes(&safetensors, version, trials).await?;
+        self.record(&e, &safetensors)?;
         let mut report = BTreeMap::new();
         report.insert("success_rate".to_owned(), e.success_rate);
         report.insert("collision_rate".to_owned(), e.collision_rate);
@@ -572,14 +588,36 @@ impl Session {
         if let Some(t) = e.mean_time_s {
             report.insert("mean_time_s".to_owned(), t);
         }
-        if let Err(err) = self
-            .learner_client
-            .report_evaluation(e.weights_version, report)
-            .await
+        if self.learner.exited().is_none()
+            && let Err(err) = self
+                .learner_client
+                .report_evaluation(e.weights_version, report)
+                .await
         {
             tracing::warn!(error = %err, "reporting the evaluation to the learner");
         }
         Ok(e)
+    }
+
+    /// The weights of the newest checkpoint on disk and their version (for
+    /// the last evaluation when the learner has already stopped).
+    fn newest_checkpoint(&self) -> anyhow::Result<(u64, Vec<u8>)> {
+        let dir = self.run.out.join("checkpoints");
+        let newest = std::fs::read_dir(&dir)
+            .with_context(|| format!("reading {}", dir.display()))?
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("ckpt-"))
+            })
+            .max()
+            .with_context(|| format!("no checkpoint in {}", dir.display()))?;
+        let file = newest.join("weights.safetensors");
+        let bytes = std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
+        let (_, version) = crossroads_model::QNetwork::from_safetensors(&bytes)
+            .with_context(|| format!("{} holds no network", file.display()))?;
+        Ok((version, bytes))
     }
 
     async fn evaluate_bytes(
@@ -679,7 +717,7 @@ impl Session {
         for a in &mut self.actors {
             a.stop(GRACE).await;
         }
-        if end.is_some() && self.learner.exited().is_none() {
+        if end.is_some() {
             match self
                 .evaluate_latest(self.run.config.train.eval_trials)
                 .await
