@@ -117,7 +117,9 @@ pub struct UpdateRate {
     pub rounds: Vec<f64>,
 }
 
-fn median(v: &[f64]) -> f64 {
+/// The middle value (mean of the two middle ones for an even count); 0 for
+/// none.
+pub fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
     s.sort_by(f64::total_cmp);
     match s.len() {

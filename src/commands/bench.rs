@@ -108,16 +108,16 @@ fn replay(capacity: usize, rounds: usize, json: bool) {
     }
 }
 
-/// The middle value (mean of the two middle ones for an even count); 0 for
-/// none.
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    match s.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => s[n / 2],
-        n => (s[n / 2 - 1] + s[n / 2]) / 2.0,
-    }
+/// `dueling mlp 1408-256-256 -> 5`: a network in one line.
+fn describe_network(spec: &crossroads_model::NetworkSpec) -> String {
+    let hidden: Vec<String> = spec.hidden.iter().map(i64::to_string).collect();
+    format!(
+        "dueling {} {}-{} -> {}",
+        spec.trunk.name(),
+        spec.input_len(),
+        hidden.join("-"),
+        spec.num_actions
+    )
 }
 
 /// The one-minute load average, to print beside figures measured on a

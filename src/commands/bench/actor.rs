@@ -18,11 +18,12 @@ use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, PushConfig, Pusher, hostname,
 };
 use crossroads_common::{ActorTransport, Config, Shutdown};
+use crossroads_learner::bench::median;
 use crossroads_model::QNetwork;
 use crossroads_replay::{PreparedBatch, Table};
 use serde::Serialize;
 
-use super::{load_average, median};
+use super::{describe_network, load_average};
 
 /// What to measure.
 #[derive(Debug, Clone)]
@@ -123,17 +124,7 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
         }
     }
     let spec = crossroads_learner::network_spec(&config.learner)?;
-    let network = format!(
-        "dueling {} {}-{} -> {}",
-        spec.trunk.name(),
-        spec.input_len(),
-        spec.hidden
-            .iter()
-            .map(|h| h.to_string())
-            .collect::<Vec<_>>()
-            .join("-"),
-        spec.num_actions
-    );
+    let network = describe_network(&spec);
     let load = load_average();
     if o.json {
         println!(

@@ -167,15 +167,8 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
 
     let spec = TrainerConfig::from_config(&config.learner)?.spec;
     let network = format!(
-        "dueling {} {}-{} -> {} actions ({}), {}",
-        spec.trunk.name(),
-        spec.input_len(),
-        spec.hidden
-            .iter()
-            .map(|h| h.to_string())
-            .collect::<Vec<_>>()
-            .join("-"),
-        spec.num_actions,
+        "{} actions ({}), {}",
+        super::describe_network(&spec),
         spec.observation.kind,
         OptimizerConfig::from_config(&config.learner).name()
     );
