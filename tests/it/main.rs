@@ -2,6 +2,7 @@
 //! one test binary.
 
 mod cli;
+mod experiments;
 mod learner;
 mod replay;
 mod setup_libtorch;
