@@ -39,6 +39,27 @@ pub struct GlobalArgs {
     pub sets: Vec<String>,
 }
 
+/// Every `--set KEY=VALUE` (also `--set=KEY=VALUE` and `-s KEY=VALUE`) of
+/// a command line, in order, wherever it stands: clap keeps only the group
+/// after the subcommand when a global flag appears on both sides of it.
+/// Stops at `--`.
+pub fn every_set(args: impl IntoIterator<Item = std::ffi::OsString>) -> Vec<String> {
+    let mut sets = Vec::new();
+    let mut args = args.into_iter().map(|a| a.to_string_lossy().into_owned());
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--" => break,
+            "--set" | "-s" => sets.extend(args.next()),
+            _ => {
+                if let Some(v) = arg.strip_prefix("--set=") {
+                    sets.push(v.to_owned());
+                }
+            }
+        }
+    }
+    sets
+}
+
 impl GlobalArgs {
     /// The configuration layers these options describe.
     pub fn loader(&self) -> ConfigLoader {

@@ -4,10 +4,13 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use crossroads::cli::Cli;
+use crossroads::cli::{Cli, every_set};
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let mut cli = Cli::parse();
+    // clap keeps only the last group of a global flag given both before
+    // and after the subcommand; every --set counts.
+    cli.global.sets = every_set(std::env::args_os().skip(1));
     match crossroads::run(cli) {
         Ok(code) => code,
         Err(e) => {

@@ -81,6 +81,7 @@ fn config_show_prints_toml_with_layers_applied() {
     let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
         .args(["--config", file.to_str().expect("utf-8 path")])
         .args(["--set", "runtime.compute_threads=3", "config", "show"])
+        .args(["--set", "actor.envs=12"])
         .env("CROSSROADS_TELEMETRY__LOG_FORMAT", "json")
         .output()
         .expect("run");
@@ -100,6 +101,11 @@ fn config_show_prints_toml_with_layers_applied() {
         shown["telemetry"]["log_format"].as_str(),
         Some("json"),
         "from the environment"
+    );
+    assert_eq!(
+        shown["actor"]["envs"].as_integer(),
+        Some(12),
+        "a --set after the subcommand adds to those before it"
     );
 }
 
