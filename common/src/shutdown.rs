@@ -6,6 +6,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use tokio_util::sync::CancellationToken;
 
+/// Signals closer than this to the first one are the same request, not a
+/// second one that forces an exit.
+pub const SAME_REQUEST: std::time::Duration = std::time::Duration::from_secs(1);
+
 /// A cloneable shutdown signal. Firing it is idempotent; every clone sees it.
 ///
 /// Cheap to clone and to poll from any thread: async code awaits
@@ -24,9 +28,12 @@ impl Shutdown {
     }
 
     /// A signal that also fires on SIGINT or SIGTERM. A second signal exits
-    /// the process at once with status 130, for when a clean stop hangs.
-    /// Must be called inside a tokio runtime; the handlers are registered
-    /// before it returns.
+    /// the process at once with status 130, for when a clean stop hangs;
+    /// signals within [`SAME_REQUEST`] of the first count as the same
+    /// request (coreutils `timeout` and process-group kills deliver one
+    /// SIGTERM twice, which must not skip a last checkpoint). Must be
+    /// called inside a tokio runtime; the handlers are registered before
+    /// it returns.
     pub fn on_signals() -> std::io::Result<Self> {
         use tokio::signal::unix::{SignalKind, signal};
         let shutdown = Self::new();
@@ -34,17 +41,21 @@ impl Shutdown {
         let mut term = signal(SignalKind::terminate())?;
         let fire = shutdown.clone();
         tokio::spawn(async move {
-            let mut seen = 0;
+            let mut first: Option<std::time::Instant> = None;
             loop {
                 let name = tokio::select! {
                     _ = int.recv() => "SIGINT",
                     _ = term.recv() => "SIGTERM",
                 };
-                seen += 1;
-                if seen > 1 {
+                if let Some(at) = first {
+                    if at.elapsed() < SAME_REQUEST {
+                        tracing::debug!(signal = name, "repeated signal, same request");
+                        continue;
+                    }
                     tracing::warn!(signal = name, "second signal, exiting now");
                     std::process::exit(130);
                 }
+                first = Some(std::time::Instant::now());
                 tracing::info!(signal = name, "shutting down (send again to force)");
                 fire.by_signal.store(true, Ordering::SeqCst);
                 fire.trigger();

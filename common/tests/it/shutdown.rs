@@ -33,8 +33,11 @@ async fn child_fires_alone_without_stopping_the_parent() {
 async fn sigterm_fires_the_signal() {
     let shutdown = Shutdown::on_signals().expect("handlers");
     // The handlers are installed: a real SIGTERM to this process is caught.
+    // Sent twice at once (as coreutils `timeout` does), it is one request,
+    // not the second signal that exits at once: this test would not finish.
+    let pid = std::process::id().to_string();
     let status = std::process::Command::new("kill")
-        .args(["-TERM", &std::process::id().to_string()])
+        .args(["-TERM", &pid, &pid])
         .status()
         .expect("run kill");
     assert!(status.success());
@@ -42,4 +45,5 @@ async fn sigterm_fires_the_signal() {
         .await
         .expect("SIGTERM fired the shutdown signal");
     assert!(shutdown.by_signal());
+    tokio::time::sleep(Duration::from_millis(300)).await;
 }
