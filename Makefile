@@ -21,9 +21,10 @@ pydeps:
 build: setup
 	$(CARGO) build --release --bin crossroads
 
-# Until `crossroads train` lands, the main job is the machine check.
+# The main job: train DQN-TTG on left (the built-in experiment ttg-left)
+# into runs/left-ttg; a second `make run` continues or re-reports it.
 run: build
-	./target/release/crossroads doctor $(RUN_ARGS)
+	./target/release/crossroads train --resume $(RUN_ARGS)
 
 test: setup pydeps
 	$(CARGO) fmt --all -- --check

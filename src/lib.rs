@@ -7,6 +7,7 @@
 
 pub mod cli;
 pub mod commands;
+pub mod experiments;
 pub mod network_policy;
 pub mod plot;
 pub mod progress;
@@ -45,5 +46,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Checkpoints(args) => commands::checkpoints::run(&args),
         Command::Actor(args) => commands::actor::run(&config, &args),
         Command::Train(args) => commands::train::run(&config, &args),
+        Command::Reproduce(args) => commands::reproduce::run(&cli.global, &args),
     }
 }

@@ -30,6 +30,19 @@ pub struct Series {
     pub line: bool,
 }
 
+/// One chart of a figure: a title, axis labels and its series.
+#[derive(Debug, Clone)]
+pub struct Panel {
+    /// Caption above the chart.
+    pub title: String,
+    /// X axis label.
+    pub x_label: String,
+    /// Y axis label.
+    pub y_label: String,
+    /// The series drawn.
+    pub series: Vec<Series>,
+}
+
 /// A scatter/line chart written to `path` as PNG (800 x 560).
 pub fn chart(
     path: &Path,
@@ -38,7 +51,45 @@ pub fn chart(
     y_label: &str,
     series: &[Series],
 ) -> anyhow::Result<()> {
+    let panel = Panel {
+        title: title.to_owned(),
+        x_label: x_label.to_owned(),
+        y_label: y_label.to_owned(),
+        series: series.to_vec(),
+    };
+    grid(path, None, 1, std::slice::from_ref(&panel))
+}
+
+/// Panels in a grid of `cols` columns (each 800 x 560), under an optional
+/// overall title, written to `path` as PNG. Panels with nothing to plot
+/// are an error naming the panel.
+pub fn grid(path: &Path, title: Option<&str>, cols: usize, panels: &[Panel]) -> anyhow::Result<()> {
     register_font();
+    let cols = cols.clamp(1, panels.len().max(1));
+    let rows = panels.len().div_ceil(cols).max(1);
+    let head = if title.is_some() { 40 } else { 0 };
+    let size = (800 * cols as u32, 560 * rows as u32 + head);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let draw = |e: &dyn std::fmt::Display| anyhow!("drawing {}: {e}", path.display());
+    root.fill(&WHITE).map_err(|e| draw(&e))?;
+    let body = match title {
+        Some(t) => root.titled(t, (FONT, 28)).map_err(|e| draw(&e))?,
+        None => root.clone(),
+    };
+    for (area, panel) in body.split_evenly((rows, cols)).iter().zip(panels) {
+        draw_panel(area, panel)
+            .map_err(|e| anyhow!("{} in {}: {e:#}", panel.title, path.display()))?;
+    }
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+fn draw_panel(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    panel: &Panel,
+) -> anyhow::Result<()> {
+    let series = &panel.series;
     let all = series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in all.filter(|(x, y)| x.is_finite() && y.is_finite()) {
@@ -48,7 +99,7 @@ pub fn chart(
         y1 = y1.max(y);
     }
     if x0 > x1 {
-        return Err(anyhow!("nothing to plot in {}", path.display()));
+        return Err(anyhow!("nothing to plot"));
     }
     let pad = |lo: f64, hi: f64| {
         let span = (hi - lo).max(1e-6);
@@ -57,11 +108,9 @@ pub fn chart(
     let (x0, x1) = pad(x0, x1);
     let (y0, y1) = pad(y0.min(0.0), y1);
 
-    let root = BitMapBackend::new(path, (800, 560)).into_drawing_area();
-    let draw = |e: &dyn std::fmt::Display| anyhow!("drawing {}: {e}", path.display());
-    root.fill(&WHITE).map_err(|e| draw(&e))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FONT, 22))
+    let draw = |e: &dyn std::fmt::Display| anyhow!("{e}");
+    let mut chart = ChartBuilder::on(area)
+        .caption(&panel.title, (FONT, 22))
         .margin(16)
         .x_label_area_size(44)
         .y_label_area_size(64)
@@ -69,8 +118,8 @@ pub fn chart(
         .map_err(|e| draw(&e))?;
     chart
         .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
+        .x_desc(&panel.x_label)
+        .y_desc(&panel.y_label)
         .label_style((FONT, 14))
         .draw()
         .map_err(|e| draw(&e))?;
@@ -100,7 +149,5 @@ pub fn chart(
         .border_style(BLACK)
         .draw()
         .map_err(|e| draw(&e))?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

@@ -30,6 +30,8 @@ pub struct ActorSettings {
     pub n_step: usize,
     /// Discount per simulation step.
     pub gamma: f64,
+    /// Collision reward replacing the scenario's, if set.
+    pub collision_reward: Option<f64>,
     /// Transitions per batch.
     pub batch_size: usize,
     /// This actor's index i and the actor count N.
@@ -69,6 +71,7 @@ impl ActorSettings {
             envs: config.envs.max(1),
             n_step: config.n_step.max(1) as usize,
             gamma: config.gamma,
+            collision_reward: config.collision_reward,
             batch_size: config.batch_size.max(1),
             index,
             count,
@@ -174,6 +177,7 @@ impl Actor {
     pub fn new(settings: ActorSettings, metrics: ActorMetrics) -> Result<Self, ActorError> {
         let mut env_config = EnvConfig::for_actions(settings.action_set);
         env_config.gamma = settings.gamma;
+        env_config.collision_reward = settings.collision_reward;
         let training = settings.mode.is_training();
         let encoding = ObservationEncoding::SparseF32;
         let envs = VecEnv::new(

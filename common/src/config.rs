@@ -492,6 +492,7 @@ impl ConfigError {
 /// Builds a [`Config`] from its layers. Later layers win.
 #[derive(Debug, Default, Clone)]
 pub struct ConfigLoader {
+    base: Option<(String, String)>,
     file: Option<PathBuf>,
     env: bool,
     sets: Vec<String>,
@@ -510,6 +511,13 @@ impl ConfigLoader {
     /// Ignores the environment (for tests and tools that want only a file).
     pub fn without_env(mut self) -> Self {
         self.env = false;
+        self
+    }
+
+    /// A built-in TOML text under `name` (an experiment's settings, say),
+    /// applied over the defaults and under the file and everything else.
+    pub fn base(mut self, name: impl Into<String>, toml: impl Into<String>) -> Self {
+        self.base = Some((name.into(), toml.into()));
         self
     }
 
@@ -543,9 +551,15 @@ impl ConfigLoader {
     /// Merges the layers, deserializes and validates.
     pub fn load(&self) -> Result<Config, ConfigError> {
         let mut figment = Figment::from(Named {
-            name: DEFAULTS,
+            name: DEFAULTS.into(),
             inner: Serialized::defaults(Config::default()),
         });
+        if let Some((name, text)) = &self.base {
+            figment = figment.merge(Named {
+                name: name.clone().into(),
+                inner: Toml::string(text),
+            });
+        }
         if let Some(path) = &self.file {
             // figment treats a missing file as empty; a file the user named
             // must exist.
@@ -571,13 +585,13 @@ impl ConfigLoader {
                 .ok_or_else(|| ConfigError::BadOverride(set.clone()))?;
             let value: Value = value.trim().parse().unwrap_or_else(|_| Value::from(value));
             figment = figment.merge(Named {
-                name: COMMAND_LINE,
+                name: COMMAND_LINE.into(),
                 inner: Serialized::default(key.trim(), value),
             });
         }
         for (key, value) in &self.flags {
             figment = figment.merge(Named {
-                name: COMMAND_LINE,
+                name: COMMAND_LINE.into(),
                 inner: Serialized::default(key, value),
             });
         }
@@ -605,13 +619,13 @@ impl ConfigLoader {
 /// A provider under a name of ours, so errors can say where a value came
 /// from ("defaults", "command line") rather than "Serialized".
 struct Named<P> {
-    name: &'static str,
+    name: std::borrow::Cow<'static, str>,
     inner: P,
 }
 
 impl<P: Provider> Provider for Named<P> {
     fn metadata(&self) -> Metadata {
-        Metadata::named(self.name)
+        Metadata::named(self.name.clone())
     }
 
     fn data(&self) -> Result<Map<Profile, Dict>, figment::Error> {

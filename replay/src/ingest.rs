@@ -5,9 +5,14 @@
 //! subscriber per table on `<prefix>/replay/<table>/insert`. Each sample is
 //! read in place from shared memory, validated like a gRPC batch and
 //! released before the insert, which waits for the rate limiter without
-//! dropping the batch: while it waits the queue fills and publishers feel
-//! the back-pressure (their sends time out), rather than batches being lost
-//! here. Every batch is answered on `<prefix>/replay/<table>/acks` once
+//! dropping the batch. Publishers are served in turn: iceoryx2 hands out
+//! the first publisher's samples while it has any, so under a rate limiter
+//! one busy actor would starve the others (seen with two actors: the second
+//! waited 30 s for acknowledgements and fell back to dropping). The thread
+//! takes every waiting sample into a queue per publisher and inserts one
+//! batch of each in turn; the publishers' own limit on unacknowledged
+//! batches (`actor.in_flight`) bounds those queues and is where they feel
+//! the back-pressure. Every batch is answered on `<prefix>/replay/<table>/acks` once
 //! stored or rejected. At shutdown the queue is drained into the tables,
 //! whatever the rate limiter says, before the server's last snapshot.
 
@@ -85,40 +90,31 @@ impl ShmIngest {
                         return;
                     }
                 };
-                let receive = |port: &Port, draining: bool| -> bool {
-                    match port.subscriber.receive() {
-                        Ok(Some(sample)) => {
-                            let read = shm::read_frame(sample.user_header(), sample.payload());
-                            let origin = sample.origin().value();
-                            let batch_id = sample.user_header().batch_id;
-                            // The shared-memory slot goes back to the
-                            // publisher before the insert may wait.
-                            drop(sample);
-                            let outcome = handle(&state, &runtime, &port.table, read, draining);
-                            let ack = shm::ShmInsertAck::new(origin, batch_id, outcome);
-                            if let Err(e) = port.acks.send_copy(ack) {
-                                tracing::warn!(error = ?e, "sending a shared-memory acknowledgement");
-                            }
-                            true
-                        }
-                        Ok(None) => false,
-                        Err(e) => {
-                            tracing::warn!(error = ?e, "receiving from shared memory");
-                            false
-                        }
+                let serve = |port: &Port, queue: &mut FairQueue, draining: bool| -> bool {
+                    queue.take_all(&port.subscriber);
+                    let Some(r) = queue.next() else {
+                        return false;
+                    };
+                    let outcome = handle(&state, &runtime, &port.table, r.read, draining);
+                    let ack = shm::ShmInsertAck::new(r.origin, r.batch_id, outcome);
+                    if let Err(e) = port.acks.send_copy(ack) {
+                        tracing::warn!(error = ?e, "sending a shared-memory acknowledgement");
                     }
+                    true
                 };
+                let mut queues: Vec<FairQueue> =
+                    subscribers.iter().map(|_| FairQueue::default()).collect();
                 while !state.shutdown.is_triggered() {
                     let mut busy = false;
-                    for port in &subscribers {
-                        busy |= receive(port, false);
+                    for (port, queue) in subscribers.iter().zip(&mut queues) {
+                        busy |= serve(port, queue, false);
                     }
                     if !busy {
                         std::thread::sleep(IDLE);
                     }
                 }
-                for port in &subscribers {
-                    while receive(port, true) {}
+                for (port, queue) in subscribers.iter().zip(&mut queues) {
+                    while serve(port, queue, true) {}
                 }
             })
             .map_err(|e| ShmError::iceoryx("starting the ingest thread", e))?;
@@ -153,6 +149,74 @@ impl ShmIngest {
 }
 
 type Ipc = iceoryx2::service::ipc::Service;
+
+/// Samples taken per pass at most (a bound on memory; publishers hold
+/// back far sooner, at `actor.in_flight` unacknowledged batches each).
+const TAKE_MAX: usize = 1024;
+
+/// One received batch, read out of shared memory.
+struct Received {
+    origin: u128,
+    batch_id: u64,
+    read: Result<(String, u64, crossroads_common::TransitionBatch), BatchError>,
+}
+
+/// Received batches by publisher, served one publisher after another.
+#[derive(Default)]
+struct FairQueue {
+    by_origin: std::collections::BTreeMap<u128, std::collections::VecDeque<Received>>,
+    last: Option<u128>,
+}
+
+impl FairQueue {
+    /// Takes every sample waiting on `subscriber` (at most [`TAKE_MAX`]),
+    /// releasing the shared memory at once.
+    fn take_all(
+        &mut self,
+        subscriber: &iceoryx2::port::subscriber::Subscriber<Ipc, [u8], shm::BatchFrameHeader>,
+    ) {
+        for _ in 0..TAKE_MAX {
+            match subscriber.receive() {
+                Ok(Some(sample)) => {
+                    let r = Received {
+                        origin: sample.origin().value(),
+                        batch_id: sample.user_header().batch_id,
+                        read: shm::read_frame(sample.user_header(), sample.payload()),
+                    };
+                    self.push(r);
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::warn!(error = ?e, "receiving from shared memory");
+                    break;
+                }
+            }
+        }
+    }
+
+    fn push(&mut self, r: Received) {
+        self.by_origin.entry(r.origin).or_default().push_back(r);
+    }
+
+    /// The oldest batch of the publisher after the last one served.
+    fn next(&mut self) -> Option<Received> {
+        let after = self
+            .last
+            .and_then(|l| {
+                use std::ops::Bound::{Excluded, Unbounded};
+                self.by_origin.range((Excluded(l), Unbounded)).next()
+            })
+            .map(|(k, _)| *k);
+        let origin = after.or_else(|| self.by_origin.keys().next().copied())?;
+        let queue = self.by_origin.get_mut(&origin)?;
+        let r = queue.pop_front();
+        if queue.is_empty() {
+            self.by_origin.remove(&origin);
+        }
+        self.last = Some(origin);
+        r
+    }
+}
 
 /// One table's shared-memory ports.
 struct Port {
@@ -234,5 +298,39 @@ fn handle(
                 return Err(RejectReason::BadRequest);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn received(origin: u128, batch_id: u64) -> Received {
+        Received {
+            origin,
+            batch_id,
+            read: Err(BatchError::new(
+                RejectReason::BadRequest,
+                "test",
+                String::new(),
+            )),
+        }
+    }
+
+    #[test]
+    fn publishers_are_served_in_turn_each_in_order() {
+        let mut q = FairQueue::default();
+        // A busy publisher (7) queued three batches before the others.
+        for (origin, id) in [(7, 0), (7, 1), (7, 2), (3, 0), (u128::MAX, 0), (3, 1)] {
+            q.push(received(origin, id));
+        }
+        let order: Vec<(u128, u64)> = std::iter::from_fn(|| q.next())
+            .map(|r| (r.origin, r.batch_id))
+            .collect();
+        assert_eq!(
+            order,
+            [(3, 0), (7, 0), (u128::MAX, 0), (3, 1), (7, 1), (7, 2)]
+        );
+        assert!(q.next().is_none());
     }
 }

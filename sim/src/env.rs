@@ -39,6 +39,9 @@ pub struct EnvConfig {
     pub observation: ObsKind,
     /// Discount used to sum the rewards of a k-step action.
     pub gamma: f64,
+    /// Reward of a collision, replacing the scenario's `rewards.collision`
+    /// (reward shaping for training; outcomes are the same).
+    pub collision_reward: Option<f64>,
 }
 
 impl EnvConfig {
@@ -53,6 +56,7 @@ impl EnvConfig {
             action_set,
             observation,
             gamma: 0.99,
+            collision_reward: None,
         }
     }
 }
@@ -247,7 +251,7 @@ impl Env {
         let mut r = rewards.step;
         if self.collides() {
             self.outcome = Some(Outcome::Collision);
-            r += rewards.collision;
+            r += self.config.collision_reward.unwrap_or(rewards.collision);
         } else if self.ego.s >= sc.spec().ego.goal_s {
             self.outcome = Some(Outcome::Success);
             r += rewards.success;

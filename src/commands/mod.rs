@@ -9,6 +9,7 @@ pub mod eval;
 pub mod learner;
 pub mod render;
 pub mod replay;
+pub mod reproduce;
 pub mod role;
 pub mod train;
 pub mod tune_ttc;

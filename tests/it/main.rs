@@ -5,6 +5,7 @@ mod cli;
 mod experiments;
 mod learner;
 mod replay;
+mod reproduce;
 mod setup_libtorch;
 mod sim_commands;
 mod train;

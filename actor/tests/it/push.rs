@@ -280,3 +280,77 @@ async fn a_rate_limited_replay_slows_the_actor_instead_of_losing_batches() {
     shutdown.trigger();
     server.join().await.expect("clean stop");
 }
+
+/// Two actors push over iceoryx2 to a replay whose rate limiter holds
+/// inserts back while a slow sampler (the learner's part) drains it. Both
+/// get their batches in: iceoryx2 hands out the first publisher's samples
+/// while it has any, so without the replay serving publishers in turn the
+/// second actor waited for acknowledgements until it gave up on the
+/// replay (seen in `crossroads train` with two actors).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_actors_behind_a_rate_limiter_both_get_their_batches_in() {
+    let prefix = unique_prefix("fair");
+    let shutdown = Shutdown::new();
+    let mut config = replay_config("127.0.0.1:0", Some(&prefix));
+    config.replay.min_size_to_sample = 100;
+    config.replay.samples_per_insert = 1.0;
+    config.replay.rate_tolerance = 100.0;
+    let server = crossroads_replay::start(&config, None, shutdown.clone())
+        .await
+        .expect("replay");
+    let table = server.table("t").expect("table");
+    let mut pushers = Vec::new();
+    for _ in 0..2 {
+        let metrics = ActorMetrics::new(None, "left").expect("metrics");
+        let mut c = push_config(ActorTransport::Shm, "http://127.0.0.1:1", &prefix, 64);
+        c.in_flight = 2;
+        let pusher = Pusher::start(&c, metrics.clone(), &shutdown).expect("pusher");
+        // Far more than the limiter lets in at once: both queues stay full.
+        for b in some_batches(40, 25) {
+            pusher.push(b);
+        }
+        pushers.push((pusher, metrics));
+    }
+    // The sampler: 25 items at a time, so 25 more may go in each time.
+    let sampler = {
+        let table = table.clone();
+        let stop = shutdown.clone();
+        tokio::spawn(async move {
+            while !stop.is_triggered() {
+                let _ = table
+                    .sample(25, 0.4, Duration::from_millis(200), &stop)
+                    .await;
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+    };
+    eventually(
+        Duration::from_secs(30),
+        "one actor's first 500 items in",
+        || pushers.iter().any(|(_, m)| m.pushed_total("shm") >= 500),
+    )
+    .await;
+    // Served in turn, the other is close behind (it started later; served
+    // first-come, it would still be near 0).
+    let counts: Vec<u64> = pushers.iter().map(|(_, m)| m.pushed_total("shm")).collect();
+    assert!(
+        counts.iter().all(|&n| n >= 250),
+        "one actor got its batches in, the other waited: {counts:?}"
+    );
+    eventually(Duration::from_secs(30), "every batch in", || {
+        pushers.iter().all(|(_, m)| m.pushed_total("shm") == 1000)
+    })
+    .await;
+    for (pusher, metrics) in pushers {
+        assert_eq!(metrics.dropped_total("buffer_full"), 0);
+        assert_eq!(
+            metrics.retries_total("shm"),
+            0,
+            "no batch waited for its ack until the timeout"
+        );
+        drop(pusher);
+    }
+    shutdown.trigger();
+    let _ = sampler.await;
+    server.join().await.expect("clean stop");
+}

@@ -38,6 +38,9 @@ pub struct ActorConfig {
     /// Discount per simulation step; a k-step action is discounted by
     /// gamma^k. In (0, 1].
     pub gamma: f64,
+    /// Reward of a collision in training, replacing the scenario's (the
+    /// paper's -10). Unset: the scenario's. Finite and at most 0.
+    pub collision_reward: Option<f64>,
     /// Transitions per pushed batch. 1 to 16384 (and at most the replay
     /// server's `replay.max_batch_transitions`).
     pub batch_size: usize,
@@ -81,6 +84,7 @@ impl Default for ActorConfig {
             envs: 8,
             n_step: 3,
             gamma: 0.99,
+            collision_reward: None,
             batch_size: 128,
             index: None,
             count: 1,
@@ -132,6 +136,13 @@ impl ActorConfig {
             "gamma",
             format!("must be in (0, 1], got {}", self.gamma),
         );
+        if let Some(r) = self.collision_reward {
+            check(
+                r.is_finite() && r <= 0.0,
+                "collision_reward",
+                format!("must be finite and at most 0, got {r}"),
+            );
+        }
         check(
             (1..=16_384).contains(&self.batch_size),
             "batch_size",

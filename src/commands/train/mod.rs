@@ -33,8 +33,9 @@ use crossroads_sim::{ActionSet, Env, EnvConfig, EvalConfig, Scenario, evaluate};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use self::procs::{Role, free_port};
-use self::record::{Curve, Reached, TrainMetrics, plot_curve, write_atomic};
-pub use self::record::{Evaluation, Summary, read_curve};
+pub use self::record::write_atomic;
+use self::record::{Curve, Reached, TrainMetrics, plot_curve};
+pub use self::record::{Evaluation, Summary, curve_panel, read_curve};
 use super::role;
 use crate::cli::{GlobalArgs, TrainArgs};
 use crate::network_policy::NetworkPolicy;
@@ -62,16 +63,28 @@ impl TrainArgs {
         })
     }
 
+    /// The built-in experiment these flags name (default: ttg on left).
+    pub fn experiment(&self) -> Option<crate::experiments::Experiment> {
+        crate::experiments::find(
+            self.actions.as_deref().unwrap_or("ttg"),
+            self.scenario.as_deref().unwrap_or("left"),
+        )
+    }
+
     /// The configuration layers of a run: with `--resume` and no
     /// `--config`, the run folder's `config.toml` is the file; then these
-    /// flags.
+    /// flags. Without a file, the paper's experiment for the scenario and action
+    /// set (configs/experiments/, built in) is the base, so that plain
+    /// `crossroads train` trains DQN-TTG on left with tuned settings.
     pub fn loader(&self, global: &GlobalArgs) -> ConfigLoader {
         let mut loader = global.loader();
-        if self.resume && global.config.is_none() {
-            let saved = self.out_dir().join("config.toml");
-            if saved.exists() {
-                loader = loader.file(Some(saved));
-            }
+        let saved = self.out_dir().join("config.toml");
+        if self.resume && global.config.is_none() && saved.exists() {
+            loader = loader.file(Some(saved));
+        } else if global.config.is_none()
+            && let Some(e) = self.experiment()
+        {
+            loader = loader.base(format!("built-in experiment {}", e.name), e.toml);
         }
         if let Some(s) = &self.scenario {
             loader = loader.flag("actor.scenario", s).flag("learner.scenario", s);
@@ -823,7 +836,7 @@ fn progress_bar(budget: u64) -> ProgressBar {
 }
 
 /// A one-line description of this machine.
-fn machine() -> String {
+pub fn machine() -> String {
     let cores = std::thread::available_parallelism().map_or(0, std::num::NonZero::get);
     let model = std::fs::read_to_string("/proc/cpuinfo")
         .ok()

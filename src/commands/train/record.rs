@@ -9,7 +9,7 @@ use anyhow::Context;
 use prometheus::{Gauge, IntCounter, IntGauge, Registry};
 use serde::{Deserialize, Serialize};
 
-use crate::plot::{Series, chart};
+use crate::plot::{Panel, Series, grid};
 
 /// One greedy evaluation of one weights version.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -41,10 +41,11 @@ pub struct Evaluation {
 }
 
 impl Evaluation {
-    /// Higher is better: success, with collisions counted against it
-    /// (used to keep the best weights).
+    /// Higher is better: success, with each collision counting ten times
+    /// against it, as in the reward (+1 success, -10 collision); used to
+    /// keep the best weights.
     pub fn score(&self) -> f64 {
-        self.success_rate - self.collision_rate
+        self.success_rate - 10.0 * self.collision_rate
     }
 
     /// A short line for the progress bar and the log.
@@ -216,6 +217,12 @@ pub fn read_curve(path: &Path) -> anyhow::Result<Vec<Evaluation>> {
 /// `curve.png`: greedy success and collision rates (%) against
 /// wall-clock minutes.
 pub fn plot_curve(path: &Path, title: &str, rows: &[Evaluation]) -> anyhow::Result<()> {
+    grid(path, None, 1, &[curve_panel(title, rows)])
+}
+
+/// The learning curve of `rows` as one panel: greedy success, collision
+/// and timeout rates (%) against wall-clock minutes.
+pub fn curve_panel(title: &str, rows: &[Evaluation]) -> Panel {
     let series = |label: &str, f: &dyn Fn(&Evaluation) -> f64| Series {
         label: label.to_owned(),
         points: rows
@@ -224,17 +231,16 @@ pub fn plot_curve(path: &Path, title: &str, rows: &[Evaluation]) -> anyhow::Resu
             .collect(),
         line: true,
     };
-    chart(
-        path,
-        title,
-        "wall-clock minutes",
-        "% of greedy evaluation trials",
-        &[
+    Panel {
+        title: title.to_owned(),
+        x_label: "wall-clock minutes".to_owned(),
+        y_label: "% of greedy evaluation trials".to_owned(),
+        series: vec![
             series("success", &|e| e.success_rate),
             series("collision", &|e| e.collision_rate),
             series("timeout", &|e| e.timeout_rate),
         ],
-    )
+    }
 }
 
 /// The `crossroads_train_*` metrics of the `train` process.

@@ -1,0 +1,603 @@
+//! `crossroads reproduce`: the paper's tables and Figure 3, measured here.
+//!
+//! Three phases. Training: every experiment a requested part needs
+//! (configs/experiments/, built in) becomes one `crossroads train` run
+//! under `<out>/runs/<experiment>`, started as a child process with its own
+//! progress bar; a finished run is reused and an interrupted one resumed.
+//! Evaluation: TTC threshold sweeps (the lowest threshold with zero
+//! collisions is the TTC cell, as in the paper) and the best weights of
+//! each run, all on the same seeded trials. Report: Markdown and CSV with
+//! the paper's numbers beside ours, figures, and what each run cost
+//! (`report.rs`).
+
+mod paper;
+mod report;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use crossroads_common::Shutdown;
+use crossroads_sim::{
+    ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Scenario, SweepPoint, TuneReport,
+    default_thresholds, evaluate, tune_ttc,
+};
+use serde::Serialize;
+
+use super::train::{Evaluation, Summary, read_curve};
+use crate::cli::{GlobalArgs, Part, ReproduceArgs};
+use crate::experiments;
+use crate::network_policy::NetworkPolicy;
+use crate::progress;
+
+/// Settings `--quick` adds to every run: a small network, short warm-up
+/// and frequent small evaluations.
+const QUICK_SETS: [&str; 6] = [
+    "learner.hidden=[64,64]",
+    "replay.min_size_to_sample=500",
+    "train.eval_every=100",
+    "train.eval_trials=100",
+    "train.confirm_trials=200",
+    "actor.envs=8",
+];
+
+/// Update budget of a `--quick` run.
+const QUICK_UPDATES: u64 = 200;
+
+/// Trials per cell with `--quick`.
+const QUICK_TRIALS: u64 = 300;
+
+/// What a reproduction does, from the flags.
+#[derive(Debug, Clone)]
+struct Plan {
+    out: PathBuf,
+    parts: Vec<Part>,
+    sequential: bool,
+    trials: u64,
+    seed: u64,
+    quick: bool,
+    budget_minutes: f64,
+    updates: Option<u64>,
+    actors: Option<u32>,
+    sets: Vec<String>,
+}
+
+impl Plan {
+    fn new(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<Self> {
+        anyhow::ensure!(args.trials > 0, "--trials must be at least 1");
+        anyhow::ensure!(
+            args.budget.is_finite() && args.budget >= 0.0,
+            "--budget must be minutes >= 0, not {}",
+            args.budget
+        );
+        anyhow::ensure!(
+            global.config.is_none(),
+            "reproduce runs the built-in experiments (configs/experiments/); \
+             --config applies to `crossroads train`, use --set to change a key in every run"
+        );
+        let parts = if args.only.is_empty() {
+            vec![Part::Table1, Part::Table2, Part::Table3, Part::Fig3]
+        } else {
+            let mut p = args.only.clone();
+            p.sort_by_key(|p| *p as u8);
+            p.dedup();
+            p
+        };
+        let mut sets = global.sets.clone();
+        if args.quick {
+            sets.splice(0..0, QUICK_SETS.iter().map(|s| (*s).to_owned()));
+        }
+        Ok(Self {
+            out: args.out.clone(),
+            parts,
+            sequential: !(args.no_sequential || args.quick),
+            trials: if args.quick {
+                args.trials.min(QUICK_TRIALS)
+            } else {
+                args.trials
+            },
+            seed: args.seed,
+            quick: args.quick,
+            budget_minutes: args.budget,
+            updates: args.updates.or(if args.quick {
+                Some(QUICK_UPDATES)
+            } else {
+                None
+            }),
+            actors: args.actors,
+            sets,
+        })
+    }
+
+    fn wants(&self, part: Part) -> bool {
+        self.parts.contains(&part)
+    }
+
+    /// The experiments to train, cheapest and most used first.
+    fn experiments(&self) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        let mut add = |n: String| {
+            if !names.contains(&n) {
+                names.push(n);
+            }
+        };
+        let table1 = self.wants(Part::Table1);
+        let fig3 = self.wants(Part::Fig3);
+        if table1 || self.wants(Part::Table3) {
+            paper::SCENARIOS
+                .iter()
+                .for_each(|s| add(format!("ttg-{s}")));
+        } else if fig3 {
+            paper::FIG3_SCENARIOS
+                .iter()
+                .for_each(|s| add(format!("ttg-{s}")));
+        }
+        if self.wants(Part::Table2) {
+            add("creep-occluded".into());
+            add("ttg-occluded".into());
+        }
+        if self.sequential {
+            if table1 {
+                paper::SCENARIOS
+                    .iter()
+                    .for_each(|s| add(format!("sequential-{s}")));
+            } else if fig3 {
+                paper::FIG3_SCENARIOS
+                    .iter()
+                    .for_each(|s| add(format!("sequential-{s}")));
+            }
+            if self.wants(Part::Table2) {
+                add("sequential-occluded".into());
+            }
+        }
+        names
+    }
+
+    fn run_dir(&self, experiment: &str) -> PathBuf {
+        self.out.join("runs").join(experiment)
+    }
+
+    /// TTC thresholds swept: 0 to 10 s by 0.25 s (creep: 2 to 6 s, where
+    /// the occlusion family's zero-collision thresholds lie); coarser with
+    /// `--quick`.
+    fn thresholds(&self, creep: bool) -> Vec<f64> {
+        match (creep, self.quick) {
+            (false, false) => default_thresholds(),
+            (false, true) => (0..=8).map(|i| f64::from(i) * 0.5).collect(),
+            (true, false) => (8..=24).map(|i| f64::from(i) * 0.25).collect(),
+            (true, true) => (4..=10).map(|i| f64::from(i) * 0.5).collect(),
+        }
+    }
+}
+
+/// One evaluated cell.
+#[derive(Debug, Clone, Serialize)]
+pub struct Cell {
+    /// The policy (`ttc:1.5`, `dqn:best@v812`).
+    pub policy: String,
+    /// Trials run.
+    pub trials: u64,
+    /// Percent of trials.
+    pub success: f64,
+    /// Percent of trials.
+    pub collision: f64,
+    /// Percent of trials.
+    pub timeout: f64,
+    /// Mean time to goal of successful trials, s.
+    pub time: Option<f64>,
+    /// Mean traffic braking per trial, s.
+    pub brake: f64,
+}
+
+impl Cell {
+    fn of_report(r: &EvalReport) -> Self {
+        Self {
+            policy: r.policy.clone(),
+            trials: r.trials,
+            success: 100.0 * r.success_rate,
+            collision: 100.0 * r.collision_rate,
+            timeout: 100.0 * r.timeout_rate,
+            time: r.mean_time_s,
+            brake: r.mean_brake_s,
+        }
+    }
+
+    fn of_sweep(p: &SweepPoint, trials: u64) -> Self {
+        Self {
+            policy: format!("ttc:{}", p.threshold),
+            trials,
+            success: 100.0 * p.success_rate,
+            collision: 100.0 * p.collision_rate,
+            timeout: 100.0 * p.timeout_rate,
+            time: p.mean_time_s,
+            brake: p.mean_brake_s,
+        }
+    }
+}
+
+/// Table I, one scenario: TTC (with its threshold), DQN-Sequential,
+/// DQN-TTG.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Row1 {
+    pub scenario: String,
+    pub ttc_threshold: Option<f64>,
+    pub ttc: Option<Cell>,
+    pub sequential: Option<Cell>,
+    pub ttg: Option<Cell>,
+}
+
+/// Table II, one occluder length.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Row2 {
+    pub length_m: u32,
+    pub ttc_threshold: Option<f64>,
+    pub ttc_creep: Option<Cell>,
+    pub ttg: Option<Cell>,
+    pub creep: Option<Cell>,
+    pub sequential: Option<Cell>,
+}
+
+/// One training run and what it cost.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunRecord {
+    pub experiment: String,
+    pub summary: Summary,
+    #[serde(skip)]
+    pub curve: Vec<Evaluation>,
+}
+
+/// Everything measured.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Results {
+    pub trials: u64,
+    pub seed: u64,
+    pub quick: bool,
+    pub machine: String,
+    pub table1: Vec<Row1>,
+    pub table2: Vec<Row2>,
+    /// Row = tested on, column = trained on, in [`paper::SCENARIOS`] order.
+    pub table3: Vec<Vec<Option<Cell>>>,
+    /// TTC sweeps by scenario (`left`, `occluded-60`, ...).
+    pub sweeps: Vec<TuneReport>,
+    pub runs: Vec<RunRecord>,
+    pub started: String,
+    pub minutes: f64,
+}
+
+/// Runs the reproduction.
+pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode> {
+    let plan = Plan::new(global, args)?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let shutdown = {
+        let _enter = runtime.enter();
+        Shutdown::on_signals().context("installing the signal handlers")?
+    };
+    let start = std::time::Instant::now();
+    std::fs::create_dir_all(plan.out.join("runs"))
+        .with_context(|| format!("creating {}", plan.out.display()))?;
+    check_mode(&plan)?;
+
+    let names = plan.experiments();
+    for (i, name) in names.iter().enumerate() {
+        eprintln!("[{}/{}] {name}", i + 1, names.len());
+        train(&plan, name, &shutdown)?;
+    }
+
+    let mut results = Results {
+        trials: plan.trials,
+        seed: plan.seed,
+        quick: plan.quick,
+        machine: super::train::machine(),
+        started: now_utc(),
+        ..Results::default()
+    };
+    evaluate_all(&plan, &mut results, &shutdown)?;
+    for name in &names {
+        let dir = plan.run_dir(name);
+        let summary = Summary::load(&dir)?
+            .with_context(|| format!("{} has no summary.json", dir.display()))?;
+        let curve = read_curve(&dir.join("curve.csv")).unwrap_or_default();
+        results.runs.push(RunRecord {
+            experiment: name.clone(),
+            summary,
+            curve,
+        });
+    }
+    results.minutes = start.elapsed().as_secs_f64() / 60.0;
+    let written = report::write(&plan.out, &plan, &results)?;
+    for path in written {
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A report folder holds either `--quick` runs or full ones, never both:
+/// reusing one kind for the other would report the wrong networks.
+fn check_mode(plan: &Plan) -> anyhow::Result<()> {
+    let path = plan.out.join("mode");
+    let mode = if plan.quick { "quick" } else { "full" };
+    match std::fs::read_to_string(&path) {
+        Ok(old) if old.trim() != mode => anyhow::bail!(
+            "{} holds a {} reproduction; this one is {mode}: choose another --out",
+            plan.out.display(),
+            old.trim()
+        ),
+        Ok(_) => Ok(()),
+        Err(_) => std::fs::write(&path, format!("{mode}\n"))
+            .with_context(|| format!("writing {}", path.display())),
+    }
+}
+
+/// Trains `experiment` unless its run finished; resumes an interrupted
+/// one. The child is `crossroads train` in this process group, so Ctrl-C
+/// reaches it too and it stops cleanly (a later reproduce resumes it).
+fn train(plan: &Plan, experiment: &str, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let dir = plan.run_dir(experiment);
+    if let Some(s) = Summary::load(&dir)?
+        && matches!(s.status.as_str(), "finished" | "target")
+    {
+        eprintln!(
+            "  reusing {} ({}, {} updates, {:.1} min)",
+            dir.display(),
+            s.status,
+            s.updates,
+            s.wall_seconds / 60.0
+        );
+        return Ok(());
+    }
+    let resume = dir
+        .join("checkpoints")
+        .read_dir()
+        .is_ok_and(|mut d| d.next().is_some());
+    let e = experiments::EXPERIMENTS
+        .iter()
+        .find(|e| e.name == experiment)
+        .with_context(|| format!("no built-in experiment {experiment}"))?;
+    let configs = plan.out.join("configs");
+    std::fs::create_dir_all(&configs).with_context(|| format!("creating {}", configs.display()))?;
+    let config = configs.join(format!("{experiment}.toml"));
+    std::fs::write(&config, e.toml).with_context(|| format!("writing {}", config.display()))?;
+
+    let exe = std::env::current_exe().context("finding this program")?;
+    let mut cmd = std::process::Command::new(exe);
+    for set in &plan.sets {
+        cmd.arg("--set").arg(set);
+    }
+    cmd.arg("--config")
+        .arg(&config)
+        .arg("train")
+        .arg("--out")
+        .arg(&dir);
+    if plan.budget_minutes > 0.0 {
+        cmd.arg("--minutes").arg(plan.budget_minutes.to_string());
+    }
+    if let Some(n) = plan.updates {
+        cmd.arg("--updates").arg(n.to_string());
+    }
+    if let Some(n) = plan.actors {
+        cmd.arg("--actors").arg(n.to_string());
+    }
+    if resume {
+        cmd.arg("--resume");
+        eprintln!("  resuming {}", dir.display());
+    } else {
+        eprintln!("  training into {}", dir.display());
+    }
+    let mut child = cmd.spawn().context("starting crossroads train")?;
+    let status = loop {
+        if let Some(status) = child.try_wait().context("waiting for crossroads train")? {
+            break status;
+        }
+        if shutdown.is_triggered() {
+            // Ctrl-C reached the child as well; a SIGTERM sent to this
+            // process alone is passed on.
+            let _ = rustix::process::kill_process(
+                rustix::process::Pid::from_child(&child),
+                rustix::process::Signal::TERM,
+            );
+            let status = child.wait().context("waiting for crossroads train")?;
+            anyhow::bail!(
+                "stopped while training {experiment} ({status}); run the same command again to resume"
+            );
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    anyhow::ensure!(
+        status.success(),
+        "training {experiment} failed ({status}); its logs are in {}",
+        dir.join("logs").display()
+    );
+    Ok(())
+}
+
+/// The TTC sweeps and every DQN cell the parts need.
+fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let stop = || -> anyhow::Result<()> {
+        anyhow::ensure!(!shutdown.is_triggered(), "stopped during the evaluations");
+        Ok(())
+    };
+    // TTC sweeps: Table I and Figure 3 on the open scenarios, Table II on
+    // the occlusion family with creeping.
+    for &s in open_scenarios(plan) {
+        stop()?;
+        r.sweeps.push(sweep(plan, s, ActionSet::Ttg, false)?);
+    }
+    if plan.wants(Part::Table2) {
+        for len in paper::OCCLUSION_LENGTHS {
+            stop()?;
+            r.sweeps.push(sweep(
+                plan,
+                &format!("occluded-{len}"),
+                ActionSet::Creep,
+                true,
+            )?);
+        }
+    }
+
+    let dqn =
+        |experiment: &str, scenario: &str, actions: ActionSet| -> anyhow::Result<Option<Cell>> {
+            stop()?;
+            let dir = plan.run_dir(experiment);
+            if !dir.exists() {
+                return Ok(None);
+            }
+            evaluate_network(plan, &dir, scenario, actions)
+        };
+    // Table I's rows; Figure 3 plots the same cells.
+    for &s in open_scenarios(plan) {
+        {
+            let ttc = r.sweeps.iter().find(|w| w.scenario == s && !w.creep);
+            r.table1.push(Row1 {
+                scenario: s.to_owned(),
+                ttc_threshold: ttc.and_then(|w| w.best.as_ref()).map(|b| b.threshold),
+                ttc: ttc.and_then(|w| w.best.as_ref().map(|b| Cell::of_sweep(b, w.trials))),
+                sequential: if plan.sequential {
+                    dqn(&format!("sequential-{s}"), s, ActionSet::Sequential)?
+                } else {
+                    None
+                },
+                ttg: dqn(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
+            });
+        }
+    }
+    if plan.wants(Part::Table2) {
+        for len in paper::OCCLUSION_LENGTHS {
+            let s = format!("occluded-{len}");
+            let ttc = r.sweeps.iter().find(|w| w.scenario == s && w.creep);
+            r.table2.push(Row2 {
+                length_m: len,
+                ttc_threshold: ttc.and_then(|w| w.best.as_ref()).map(|b| b.threshold),
+                ttc_creep: ttc.and_then(|w| w.best.as_ref().map(|b| Cell::of_sweep(b, w.trials))),
+                ttg: dqn("ttg-occluded", &s, ActionSet::Ttg)?,
+                creep: dqn("creep-occluded", &s, ActionSet::Creep)?,
+                sequential: if plan.sequential {
+                    dqn("sequential-occluded", &s, ActionSet::Sequential)?
+                } else {
+                    None
+                },
+            });
+        }
+    }
+    if plan.wants(Part::Table3) {
+        for tested in paper::SCENARIOS {
+            let mut row = Vec::new();
+            for trained in paper::SCENARIOS {
+                // The diagonal is Table I's DQN-TTG cell (same trials).
+                let same = r
+                    .table1
+                    .iter()
+                    .find(|row| row.scenario == tested && tested == trained)
+                    .and_then(|row| row.ttg.clone());
+                row.push(match same {
+                    Some(cell) => Some(cell),
+                    None => dqn(&format!("ttg-{trained}"), tested, ActionSet::Ttg)?,
+                });
+            }
+            r.table3.push(row);
+        }
+    }
+    Ok(())
+}
+
+/// The scenarios without occlusion that Table I or Figure 3 need.
+fn open_scenarios(plan: &Plan) -> &'static [&'static str] {
+    if plan.wants(Part::Table1) || plan.wants(Part::Table3) {
+        &paper::SCENARIOS
+    } else if plan.wants(Part::Fig3) {
+        &paper::FIG3_SCENARIOS
+    } else {
+        &[]
+    }
+}
+
+/// A TTC threshold sweep on `scenario` with `plan.trials` trials per
+/// threshold.
+fn sweep(
+    plan: &Plan,
+    scenario: &str,
+    actions: ActionSet,
+    creep: bool,
+) -> anyhow::Result<TuneReport> {
+    let sc = Arc::new(Scenario::load(scenario).with_context(|| format!("scenario {scenario}"))?);
+    let thresholds = plan.thresholds(creep);
+    let bar = progress::bar(plan.trials * thresholds.len() as u64, "trials");
+    bar.set_message(format!(
+        "TTC{} sweep on {scenario}",
+        if creep { " with creep" } else { "" }
+    ));
+    let report = tune_ttc(
+        &sc,
+        actions,
+        creep,
+        &thresholds,
+        plan.trials,
+        plan.seed,
+        &|n| bar.inc(n),
+    )?;
+    bar.finish_and_clear();
+    eprintln!(
+        "  TTC{} on {scenario}: {}",
+        if creep { " with creep" } else { "" },
+        report
+            .best
+            .as_ref()
+            .map_or("no threshold without collisions".to_owned(), |b| format!(
+                "{:.2} s, {:.2} % success, {}",
+                b.threshold,
+                100.0 * b.success_rate,
+                b.mean_time_s
+                    .map_or("-".to_owned(), |t| format!("{t:.2} s"))
+            ))
+    );
+    Ok(report)
+}
+
+/// The best weights of the run in `dir` on `scenario`; `None` when the
+/// network cannot read that scenario's observations (transfer across
+/// different grids).
+fn evaluate_network(
+    plan: &Plan,
+    dir: &Path,
+    scenario: &str,
+    actions: ActionSet,
+) -> anyhow::Result<Option<Cell>> {
+    let best = dir.join("best");
+    let policy = NetworkPolicy::load(&best)?
+        .with_context(|| format!("{} holds no weights", best.display()))?;
+    let sc = Arc::new(Scenario::load(scenario).with_context(|| format!("scenario {scenario}"))?);
+    if let Err(e) = policy.fits(&Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions))) {
+        eprintln!("  {} on {scenario}: skipped, {e:#}", dir.display());
+        return Ok(None);
+    }
+    let bar = progress::bar(plan.trials, "trials");
+    let name = dir
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    bar.set_message(format!("{name} on {scenario}"));
+    let report = evaluate(
+        &sc,
+        &policy,
+        &EvalConfig::new(actions, plan.trials, plan.seed),
+        &|n| bar.inc(n),
+    )?;
+    bar.finish_and_clear();
+    let cell = Cell::of_report(&report);
+    eprintln!(
+        "  {name} on {scenario}: {:.2} % success, {:.2} % collisions, {}",
+        cell.success,
+        cell.collision,
+        cell.time.map_or("-".to_owned(), |t| format!("{t:.2} s"))
+    );
+    Ok(Some(cell))
+}
+
+/// The current time, e.g. `Tue, 24 Nov 2026 04:30:00 GMT`.
+fn now_utc() -> String {
+    httpdate::fmt_http_date(std::time::SystemTime::now())
+}

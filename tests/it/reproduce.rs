@@ -1,0 +1,148 @@
+//! `crossroads reproduce --quick`: the whole pipeline (training runs as
+//! real processes, TTC sweeps, DQN evaluations, tables and figures) at a
+//! smoke budget; then a second call reuses the finished runs.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn crossroads(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(args)
+        .env_remove("CROSSROADS_CONFIG")
+        .output()
+        .expect("run crossroads")
+}
+
+fn reproduce(out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "--set",
+        "telemetry.metrics_addr=127.0.0.1:0",
+        "reproduce",
+        "--quick",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ];
+    args.extend_from_slice(extra);
+    crossroads(&args)
+}
+
+fn cell_trials(cell: &serde_json::Value) -> u64 {
+    cell["trials"].as_u64().unwrap_or(0)
+}
+
+#[test]
+fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("report");
+    let o = reproduce(&out, &[]);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+
+    for file in [
+        "README.md",
+        "table1.csv",
+        "table2.csv",
+        "table3.csv",
+        "training.csv",
+        "results.json",
+        "fig3.png",
+        "curves.png",
+        "configs/ttg-left.toml",
+        "runs/ttg-left/best/weights.safetensors",
+        "runs/creep-occluded/curve.png",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing; log:\n{log}");
+    }
+    for png in ["fig3.png", "curves.png"] {
+        let bytes = std::fs::read(out.join(png)).expect("png");
+        assert!(bytes.starts_with(b"\x89PNG"), "{png} is not a PNG");
+    }
+
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).expect("results"))
+            .expect("json");
+    assert_eq!(r["quick"], true);
+    let t1 = r["table1"].as_array().expect("table1");
+    assert_eq!(t1.len(), 5, "{t1:?}");
+    for row in t1 {
+        assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
+        // TTC's cell is the lowest threshold without collisions.
+        assert_eq!(row["ttc"]["collision"].as_f64(), Some(0.0), "{row}");
+        assert!(
+            row["sequential"].is_null(),
+            "--quick leaves DQN-Sequential out"
+        );
+    }
+    let t2 = r["table2"].as_array().expect("table2");
+    assert_eq!(t2.len(), 3);
+    for row in t2 {
+        for method in ["ttc_creep", "ttg", "creep"] {
+            assert_eq!(cell_trials(&row[method]), 300, "{method}: {row}");
+        }
+    }
+    let t3 = r["table3"].as_array().expect("table3");
+    assert_eq!(t3.len(), 5);
+    for (i, row) in t3.iter().enumerate() {
+        let row = row.as_array().expect("row");
+        assert_eq!(row.len(), 5);
+        // The diagonal is Table I's DQN-TTG cell.
+        assert_eq!(row[i], t1[i]["ttg"], "diagonal {i}");
+        assert!(row.iter().all(|c| cell_trials(c) == 300), "{row:?}");
+    }
+    let runs = r["runs"].as_array().expect("runs");
+    assert_eq!(runs.len(), 7, "5 TTG, creep and TTG on occlusion: {runs:?}");
+
+    let md = std::fs::read_to_string(out.join("README.md")).expect("readme");
+    assert!(md.contains("--quick smoke run"), "{md}");
+    // Paper numbers sit beside ours: Left's DQN-TTG success is 99.99.
+    assert!(md.contains("(99.99)"), "{md}");
+    assert!(md.contains("![Figure 3](fig3.png)"), "{md}");
+    let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
+    assert!(
+        csv.lines()
+            .any(|l| l.starts_with("left,dqn-ttg,success_%,") && l.ends_with(",99.99")),
+        "{csv}"
+    );
+    let training = std::fs::read_to_string(out.join("training.csv")).expect("csv");
+    assert_eq!(training.lines().count(), 8, "{training}");
+
+    // Again, Table I only: every run is reused, nothing trains.
+    let again = reproduce(&out, &["--only", "table1"]);
+    let log2 = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{log2}");
+    assert_eq!(log2.matches("reusing").count(), 5, "{log2}");
+    assert!(!log2.contains("training into"), "{log2}");
+
+    // A full reproduction into a quick report folder is refused.
+    let o = crossroads(&[
+        "--set",
+        "telemetry.metrics_addr=127.0.0.1:0",
+        "reproduce",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("holds a quick reproduction"), "{err}");
+}
+
+#[test]
+fn reproduce_refuses_a_config_file() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let cfg = dir.path().join("c.toml");
+    std::fs::write(&cfg, "").expect("write");
+    let o = crossroads(&[
+        "--config",
+        cfg.to_str().expect("utf-8"),
+        "reproduce",
+        "--quick",
+        "--out",
+        dir.path().join("r").to_str().expect("utf-8"),
+    ]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--config applies to `crossroads train`"),
+        "{err}"
+    );
+}
