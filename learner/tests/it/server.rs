@@ -235,7 +235,10 @@ async fn resume_after_restart_continues_step_and_version() {
     assert!(text.contains("crossroads_learner_sample_wait_seconds_bucket"));
 
     // Restart: the step continues from 30, the version from the last one.
-    config.learner.max_updates = 50;
+    // No budget this time, so the learner is still serving when asked (with
+    // a budget of 20 more updates it could finish, and cancel the calls,
+    // first: seen in CI).
+    config.learner.max_updates = 0;
     let second = start_learner(&config, &replay, None).await;
     let c = client(&second, None);
     let status = c.status().await.unwrap();
@@ -243,10 +246,21 @@ async fn resume_after_restart_continues_step_and_version() {
     assert!(status.weights_version > version_then, "{status:?}");
     let w = c.latest_weights().await.unwrap();
     assert!(w.version > version_then);
+    wait_for_step(&c, 50).await;
+    second.stop();
     second.join().await.unwrap();
     let entries = store.list().unwrap();
-    assert_eq!(entries[0].manifest.update_step, 50);
+    let stopped_at = entries[0].manifest.update_step;
+    assert!(stopped_at >= 50, "{stopped_at}");
     assert!(entries[0].manifest.weights_version > version_then);
+
+    // A budget after a restart counts from the restored step: it ends at
+    // exactly the budget.
+    config.learner.max_updates = stopped_at + 10;
+    let third = start_learner(&config, &replay, None).await;
+    third.join().await.unwrap();
+    let entries = store.list().unwrap();
+    assert_eq!(entries[0].manifest.update_step, stopped_at + 10);
 
     replay.shutdown.trigger();
     replay.server.join().await.unwrap();

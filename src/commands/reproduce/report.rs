@@ -102,6 +102,27 @@ fn paper2(p: &paper::Row2) -> [f64; 3] {
     [p.success, p.collision, p.time]
 }
 
+/// One CSV line per metric of `cell` (as many as the paper gives):
+/// `key,method,metric,ours,paper`.
+fn csv_cells(
+    out: &mut String,
+    key: &dyn std::fmt::Display,
+    method: &str,
+    cell: Option<&Cell>,
+    theirs: &[f64],
+) {
+    let ours = metrics(cell);
+    for (k, (metric, _)) in METRICS1.iter().take(theirs.len()).enumerate() {
+        let _ = writeln!(
+            out,
+            "{key},{method},{},{},{}",
+            metric.replace(' ', "_"),
+            ours[k].map_or(String::new(), |v| v.to_string()),
+            theirs[k]
+        );
+    }
+}
+
 fn table1_csv(r: &Results) -> String {
     let mut out = String::from("scenario,method,metric,ours,paper\n");
     for row in &r.table1 {
@@ -114,18 +135,8 @@ fn table1_csv(r: &Results) -> String {
             ("dqn-ttg", row.ttg.as_ref()),
         ];
         for (m, (name, cell)) in methods.iter().enumerate() {
-            let ours = metrics(*cell);
             let theirs = paper1(&paper::TABLE1[i][m]);
-            for (k, (metric, _)) in METRICS1.iter().enumerate() {
-                let _ = writeln!(
-                    out,
-                    "{},{name},{},{},{}",
-                    row.scenario,
-                    metric.replace(' ', "_"),
-                    ours[k].map_or(String::new(), |v| v.to_string()),
-                    theirs[k]
-                );
-            }
+            csv_cells(&mut out, &row.scenario, name, *cell, &theirs);
         }
     }
     out
@@ -141,18 +152,8 @@ fn table2_csv(r: &Results) -> String {
             ("dqn-sequential", row.sequential.as_ref()),
         ];
         for (m, (name, cell)) in methods.iter().enumerate() {
-            let ours = metrics(*cell);
             let theirs = paper2(&paper::TABLE2[i][m]);
-            for (k, (metric, _)) in METRICS1.iter().take(3).enumerate() {
-                let _ = writeln!(
-                    out,
-                    "{},{name},{},{},{}",
-                    row.length_m,
-                    metric.replace(' ', "_"),
-                    ours[k].map_or(String::new(), |v| v.to_string()),
-                    theirs[k]
-                );
-            }
+            csv_cells(&mut out, &row.length_m, name, *cell, &theirs);
         }
     }
     out
@@ -254,6 +255,24 @@ fn markdown(plan: &Plan, r: &Results) -> String {
     md
 }
 
+/// The Markdown lines of one table row: a line per metric the paper
+/// gives, `ours (paper)` per method; `label` on the first line.
+fn md_rows<const N: usize>(
+    w: &mut String,
+    label: &str,
+    cells: &[[Option<f64>; 4]],
+    theirs: &[[f64; N]],
+) {
+    for (k, (metric, d)) in METRICS1.iter().take(N).enumerate() {
+        let name = if k == 0 { label } else { "" };
+        let _ = write!(w, "| {name} | {metric} |");
+        for (ours, paper) in cells.iter().zip(theirs) {
+            let _ = write!(w, " {} |", pair(ours[k], paper[k], *d));
+        }
+        w.push('\n');
+    }
+}
+
 fn table1_md(w: &mut String, r: &Results) {
     let _ = writeln!(
         w,
@@ -270,19 +289,8 @@ fn table1_md(w: &mut String, r: &Results) {
             metrics(row.sequential.as_ref()),
             metrics(row.ttg.as_ref()),
         ];
-        for (k, (metric, d)) in METRICS1.iter().enumerate() {
-            let name = if k == 0 {
-                title(&row.scenario)
-            } else {
-                String::new()
-            };
-            let _ = write!(w, "| {name} | {metric} |");
-            for (m, ours) in cells.iter().enumerate() {
-                let theirs = paper1(&paper::TABLE1[i][m]);
-                let _ = write!(w, " {} |", pair(ours[k], theirs[k], *d));
-            }
-            w.push('\n');
-        }
+        let theirs = paper::TABLE1[i].map(|p| paper1(&p));
+        md_rows(w, &title(&row.scenario), &cells, &theirs);
     }
     let thresholds: Vec<String> = r
         .table1
@@ -318,19 +326,8 @@ fn table2_md(w: &mut String, r: &Results) {
             metrics(row.creep.as_ref()),
             metrics(row.sequential.as_ref()),
         ];
-        for (k, (metric, d)) in METRICS1.iter().take(3).enumerate() {
-            let name = if k == 0 {
-                format!("{} m", row.length_m)
-            } else {
-                String::new()
-            };
-            let _ = write!(w, "| {name} | {metric} |");
-            for (m, ours) in cells.iter().enumerate() {
-                let theirs = paper2(&paper::TABLE2[i][m]);
-                let _ = write!(w, " {} |", pair(ours[k], theirs[k], *d));
-            }
-            w.push('\n');
-        }
+        let theirs = paper::TABLE2[i].map(|p| paper2(&p));
+        md_rows(w, &format!("{} m", row.length_m), &cells, &theirs);
     }
     let thresholds: Vec<String> = r
         .table2
