@@ -32,6 +32,17 @@ fn live_actor(slot: &WeightsSlot) -> (Actor, LiveNetwork, ActorMetrics) {
     (actor, live, metrics)
 }
 
+/// Triggers its shutdown when dropped: a test that panics before it stops
+/// the acting thread still ends it, so the runtime can shut down and the
+/// failure is reported instead of hanging.
+struct StopOnDrop(Shutdown);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        self.0.trigger();
+    }
+}
+
 /// Runs the actor on a blocking thread until `stop`; returns its report and
 /// the versions applied.
 fn spawn_acting(
@@ -98,6 +109,7 @@ async fn a_running_actor_follows_a_real_learner_over_grpc_and_outlives_it() {
     )
     .expect("pusher");
     let stop = Shutdown::new();
+    let _stop_on_panic = StopOnDrop(stop.clone());
     let acting = spawn_acting(actor, live, Some(pusher), stop.clone());
 
     // The learner's first weights (published at its start), then newer
@@ -161,6 +173,7 @@ async fn a_running_actor_takes_newer_weights_from_shared_memory() {
     .expect("subscription");
     let (actor, live, metrics) = live_actor(&slot);
     let stop = Shutdown::new();
+    let _stop_on_panic = StopOnDrop(stop.clone());
     let acting = spawn_acting(actor, live, None, stop.clone());
 
     // The learner's publisher lives on one thread (it is not Send): publish
