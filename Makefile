@@ -6,7 +6,7 @@
 CARGO ?= cargo
 RUN_ARGS ?=
 
-.PHONY: all setup pydeps build run test lint fmt clean-libtorch bench-learner
+.PHONY: all setup pydeps deploydeps build run test lint fmt clean-libtorch bench-learner
 
 all: build
 
@@ -26,9 +26,14 @@ build: setup
 run: build
 	./target/release/crossroads train --resume $(RUN_ARGS)
 
-test: setup pydeps
+# Tools of the deployment tests (debootstrap, prometheus, kubectl) and the
+# local Docker base image.
+deploydeps:
+	@scripts/setup-deploy.sh
+
+test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
-	CROSSROADS_REQUIRE_PYTHON=1 $(CARGO) test --workspace --all-targets --no-fail-fast
+	CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 $(CARGO) test --workspace --all-targets --no-fail-fast
 	$(CARGO) test --workspace --doc
 
 lint: setup

@@ -4,7 +4,7 @@
 # scripts/requirements-bench.txt (torch; its wheel is taken from the libtorch
 # wheel cache when present). Idempotent: a second run only checks imports.
 #
-#   scripts/setup-python.sh           # safetensors + numpy
+#   scripts/setup-python.sh           # safetensors, numpy, kubernetes-validate
 #   scripts/setup-python.sh --bench   # ... and torch
 set -euo pipefail
 
@@ -45,7 +45,7 @@ install() {
     fi
 }
 
-if ! "$py" -c "import safetensors.numpy, numpy" 2>/dev/null; then
+if ! "$py" -c "import safetensors.numpy, numpy, kubernetes_validate" 2>/dev/null; then
     say "installing $(grep -v '^#' "$repo/scripts/requirements-test.txt" | xargs)"
     install -r "$repo/scripts/requirements-test.txt" \
         || die "could not install scripts/requirements-test.txt (is PyPI reachable?)"

@@ -33,6 +33,19 @@ pub struct GlobalArgs {
     )]
     pub config: Option<PathBuf>,
 
+    /// Start from a built-in experiment of configs/experiments/ (ttg-left,
+    /// sequential-right, ...): its settings lie under the file, the
+    /// environment and --set. How a container of a scaled run picks the
+    /// paper's tuned settings without a file.
+    #[arg(
+        long,
+        global = true,
+        env = "CROSSROADS_EXPERIMENT",
+        value_name = "NAME",
+        value_parser = experiment_name
+    )]
+    pub experiment: Option<String>,
+
     /// Override one configuration key, e.g. --set runtime.worker_threads=4.
     /// Repeatable; applied after the file and the environment.
     #[arg(long = "set", short = 's', global = true, value_name = "KEY=VALUE")]
@@ -63,9 +76,32 @@ pub fn every_set(args: impl IntoIterator<Item = std::ffi::OsString>) -> Vec<Stri
 impl GlobalArgs {
     /// The configuration layers these options describe.
     pub fn loader(&self) -> ConfigLoader {
-        ConfigLoader::new()
+        let mut loader = ConfigLoader::new();
+        if let Some(e) = self
+            .experiment
+            .as_deref()
+            .and_then(crate::experiments::named)
+        {
+            loader = loader.base(format!("built-in experiment {}", e.name), e.toml);
+        }
+        loader
             .file(self.config.as_ref())
             .sets(self.sets.iter().cloned())
+    }
+}
+
+/// A built-in experiment's name, or an error listing them.
+fn experiment_name(name: &str) -> Result<String, String> {
+    match crate::experiments::named(name) {
+        Some(e) => Ok(e.name.to_owned()),
+        None => Err(format!(
+            "no built-in experiment {name:?}; there are {}",
+            crate::experiments::EXPERIMENTS
+                .iter()
+                .map(|e| e.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
     }
 }
 
@@ -75,6 +111,11 @@ pub enum Command {
     Config(ConfigArgs),
     /// Check this machine: libtorch, threads, and a timed forward pass.
     Doctor(DoctorArgs),
+    /// Check that a role on this host is alive: GET /healthz on its
+    /// metrics address (telemetry.metrics_addr, 0.0.0.0 read as
+    /// 127.0.0.1); exit status 0 when it answers. For container health
+    /// checks.
+    Health(HealthArgs),
     /// Evaluate a policy on a scenario over seeded trials: success,
     /// collision and timeout rates, mean time and braking, with 95 %
     /// intervals.
@@ -520,6 +561,20 @@ pub enum ConfigAction {
     /// Validate the configuration and report every problem; exit status 0
     /// when it is valid.
     Check,
+}
+
+/// `crossroads health`.
+#[derive(Debug, Args)]
+pub struct HealthArgs {
+    /// Metrics address of the role to check (default: telemetry.metrics_addr).
+    #[arg(long, value_name = "ADDR")]
+    pub addr: Option<std::net::SocketAddr>,
+    /// Longest wait for the answer, milliseconds.
+    #[arg(long, value_name = "MS", default_value_t = 2000)]
+    pub timeout_ms: u64,
+    /// Print nothing when healthy.
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 /// `crossroads doctor`.

@@ -38,9 +38,13 @@ pub const EXPERIMENTS: &[Experiment] = experiments![
     "sequential-occluded",
 ];
 
+/// The experiment called `name` (`ttg-left`, say).
+pub fn named(name: &str) -> Option<Experiment> {
+    EXPERIMENTS.iter().copied().find(|e| e.name == name)
+}
+
 /// The experiment that trains `actions` on `scenario`, if the paper has
 /// one (`scenario` is a built-in name; a file has none).
 pub fn find(actions: &str, scenario: &str) -> Option<Experiment> {
-    let name = format!("{actions}-{scenario}");
-    EXPERIMENTS.iter().copied().find(|e| e.name == name)
+    named(&format!("{actions}-{scenario}"))
 }

@@ -38,6 +38,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Config(args) => commands::config::run(&cli.global, &config, &args),
         Command::Doctor(args) => commands::doctor::run(&config, &args),
         Command::Eval(args) => commands::eval::run(&args),
+        Command::Health(args) => commands::health::run(&config, &args),
         Command::TuneTtc(args) => commands::tune_ttc::run(&args),
         Command::Render(args) => commands::render::run(&args),
         Command::Replay(_) => commands::replay::run(&config),

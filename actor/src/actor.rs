@@ -5,7 +5,9 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use crossroads_common::codec::ObservationEncoding;
-use crossroads_common::{ActorConfig, Shutdown, TransitionBatch};
+use crossroads_common::retry::Backoff;
+use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_common::{ActorConfig, Shutdown, TransitionBatch, TransportConfig};
 use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
 
 use crate::error::ActorError;
@@ -86,28 +88,65 @@ pub fn actor_seed(run_seed: u64, index: u32) -> u64 {
     episode_seed(splitmix64(run_seed ^ 0xAC70_0000), u64::from(index))
 }
 
-/// This actor's index: `configured` when set, else the ordinal at the end of
-/// `hostname` (`crossroads-actor-3` gives 3, as Kubernetes StatefulSet pods
-/// are named) modulo `count`, else 0.
-pub fn resolve_index(configured: Option<u32>, count: u32, hostname: Option<&str>) -> u32 {
+/// This actor's index among `count`: `configured` when set; else, for a
+/// training actor, the index the replay server at `connection` hands out to
+/// this host's name (`JoinActor`: in order of first request, the same again
+/// for the same name, so a restarted container keeps its place), modulo
+/// `count`; an evaluating actor that has none uses 0 and takes no place on
+/// the ladder. Waits, retrying with backoff, while the replay server is not
+/// up yet; gives up when `shutdown` fires or the server refuses the name.
+pub async fn resolve_index(
+    configured: Option<u32>,
+    count: u32,
+    eval: bool,
+    connection: &TransportConfig,
+    shutdown: &Shutdown,
+) -> Result<u32, ActorError> {
     if let Some(i) = configured {
-        return i;
+        return Ok(i);
     }
-    let ordinal = hostname.and_then(|h| {
-        let digits: String = h
-            .trim()
-            .chars()
-            .rev()
-            .take_while(char::is_ascii_digit)
-            .collect::<Vec<_>>()
-            .into_iter()
-            .rev()
-            .collect();
-        digits.parse::<u64>().ok()
-    });
-    match ordinal {
-        Some(o) => (o % u64::from(count.max(1))) as u32,
-        None => 0,
+    if eval {
+        return Ok(0);
+    }
+    let name = hostname().unwrap_or_else(|| format!("pid-{}", std::process::id()));
+    let client = ReplayClient::new(connection, "")?;
+    let mut backoff = Backoff::from_config(connection);
+    loop {
+        let attempt = tokio::select! {
+            r = client.join_actor(&name) => r,
+            () = shutdown.wait() => {
+                return Err(ActorError::Config(
+                    "stopped before the replay server gave this actor an index".to_owned(),
+                ));
+            }
+        };
+        match attempt {
+            Ok(joined) => {
+                let index = joined.index % count.max(1);
+                tracing::info!(
+                    %name,
+                    joined = joined.index,
+                    index,
+                    count,
+                    "index from the replay server"
+                );
+                return Ok(index);
+            }
+            Err(e) if e.is_retryable() => {
+                if backoff.attempts().is_multiple_of(10) {
+                    tracing::warn!(
+                        endpoint = %connection.replay_endpoint,
+                        error = %e,
+                        "waiting for the replay server to hand out an index"
+                    );
+                }
+                tokio::select! {
+                    () = backoff.wait() => {}
+                    () = shutdown.wait() => {}
+                }
+            }
+            Err(e) => return Err(e.into()),
+        }
     }
 }
 

@@ -43,6 +43,17 @@ pub enum MetricsError {
 /// (connect, answer, body) is bounded by `timeout`. For tools that watch
 /// other processes, like `crossroads train`.
 pub async fn scrape(addr: SocketAddr, timeout: std::time::Duration) -> Result<String, String> {
+    get(addr, "/metrics", timeout).await
+}
+
+/// GETs `http://addr{path}` and returns the body of a 200 answer; every
+/// step (connect, answer, body) is bounded by `timeout`, and an error names
+/// the URL and the step that failed.
+pub async fn get(
+    addr: SocketAddr,
+    path: &str,
+    timeout: std::time::Duration,
+) -> Result<String, String> {
     use http_body_util::{BodyExt, Empty};
     let fetch = async {
         let stream = tokio::net::TcpStream::connect(addr)
@@ -52,7 +63,7 @@ pub async fn scrape(addr: SocketAddr, timeout: std::time::Duration) -> Result<St
             .await
             .map_err(|e| format!("handshake: {e}"))?;
         tokio::spawn(conn);
-        let req = Request::get("/metrics")
+        let req = Request::get(path)
             .header("host", addr.to_string())
             .body(Empty::<Bytes>::new())
             .map_err(|e| e.to_string())?;
@@ -72,10 +83,8 @@ pub async fn scrape(addr: SocketAddr, timeout: std::time::Duration) -> Result<St
         String::from_utf8(body.to_vec()).map_err(|e| format!("body is not UTF-8: {e}"))
     };
     match tokio::time::timeout(timeout, fetch).await {
-        Ok(r) => r.map_err(|e| format!("scraping http://{addr}/metrics: {e}")),
-        Err(_) => Err(format!(
-            "scraping http://{addr}/metrics: no answer within {timeout:?}"
-        )),
+        Ok(r) => r.map_err(|e| format!("http://{addr}{path}: {e}")),
+        Err(_) => Err(format!("http://{addr}{path}: no answer within {timeout:?}")),
     }
 }
 
@@ -201,10 +210,16 @@ async fn serve(listener: TcpListener, registry: Registry, shutdown: Shutdown) {
 fn respond(req: &Request<Incoming>, registry: &Registry) -> Response<Full<Bytes>> {
     let (status, content_type, body) = match (req.method(), req.uri().path()) {
         (&Method::GET, "/metrics") => (StatusCode::OK, prometheus::TEXT_FORMAT, render(registry)),
+        // Liveness: the endpoint lives exactly as long as its role.
+        (&Method::GET, "/healthz") => (
+            StatusCode::OK,
+            "text/plain; charset=utf-8",
+            "ok\n".to_owned(),
+        ),
         (&Method::GET, "/") => (
             StatusCode::OK,
             "text/plain; charset=utf-8",
-            "crossroads: metrics at /metrics\n".to_owned(),
+            "crossroads: metrics at /metrics, liveness at /healthz\n".to_owned(),
         ),
         (&Method::GET, _) => (
             StatusCode::NOT_FOUND,

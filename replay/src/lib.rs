@@ -17,6 +17,7 @@ pub mod compact;
 pub mod ingest;
 pub mod metrics;
 pub mod rate_limiter;
+pub mod roster;
 pub mod server;
 pub mod service;
 pub mod snapshot;

@@ -26,6 +26,7 @@ use tokio_util::task::TaskTracker;
 
 use crate::ingest::ShmIngest;
 use crate::metrics::ReplayMetrics;
+use crate::roster::Roster;
 use crate::service::{Limits, ReplayService, State};
 use crate::snapshot::{SnapshotError, Snapshots};
 use crate::table::{Table, TableConfig};
@@ -149,6 +150,7 @@ pub async fn start(
         },
         shutdown: shutdown.clone(),
         tasks: TaskTracker::new(),
+        roster: Roster::default(),
     });
     let ingest = if rc.shm_ingest {
         Some(ShmIngest::start(&config.transport, state.clone())?)

@@ -23,6 +23,7 @@ use tokio_util::task::TaskTracker;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::metrics::{ReplayMetrics, Transport};
+use crate::roster::Roster;
 use crate::snapshot::Snapshots;
 use crate::table::{PreparedBatch, Table, TableError};
 
@@ -58,6 +59,8 @@ pub struct State {
     /// Tasks serving insert streams; the server waits for them before its
     /// last snapshot, so nothing acknowledged is left out of it.
     pub tasks: TaskTracker,
+    /// Actors that asked for an index.
+    pub roster: Roster,
 }
 
 impl State {
@@ -322,5 +325,18 @@ impl pb::replay_server::Replay for ReplayService {
             bytes: written.bytes,
             duration_seconds: written.duration.as_secs_f64(),
         }))
+    }
+
+    async fn join_actor(
+        &self,
+        request: Request<pb::JoinActorRequest>,
+    ) -> Result<Response<pb::JoinActorResponse>, Status> {
+        let name = request.into_inner().name;
+        let (index, joined) = self.state.roster.join(&name).map_err(|e| {
+            self.state
+                .reject(&BatchError::new(RejectReason::BadRequest, "name", e))
+        })?;
+        tracing::info!(%name, index, joined, "an actor joined");
+        Ok(Response::new(pb::JoinActorResponse { index, joined }))
     }
 }

@@ -6,7 +6,7 @@ use std::time::Duration;
 use anyhow::Context;
 use crossroads_actor::{
     Actor, ActorMetrics, ActorSettings, LiveNetwork, Mode, PushConfig, Pusher, WeightsSlot,
-    WeightsSubscription, hostname, resolve_index,
+    WeightsSubscription, resolve_index,
 };
 use crossroads_common::Config;
 use crossroads_model::QNetwork;
@@ -25,23 +25,35 @@ pub fn run(config: &Config, args: &ActorArgs) -> anyhow::Result<ExitCode> {
 
 async fn serve(config: &Config, max_steps: Option<u64>) -> anyhow::Result<()> {
     let ac = &config.actor;
-    let host = hostname();
-    let index = resolve_index(ac.index, ac.count, host.as_deref());
-    let settings = ActorSettings::from_config(ac, index).context("configuring the actor")?;
-    tracing::info!(
-        index,
-        count = settings.count,
-        mode = ?settings.mode,
-        envs = settings.envs,
-        scenario = settings.scenario.name(),
-        action_set = %settings.action_set,
-        transport = ?ac.transport,
-        weights = ?ac.weights_transport(),
-        config = %config.to_toml(),
-        "crossroads actor starting"
-    );
+    // A bad [actor] section fails before anything starts or waits.
+    ActorSettings::from_config(ac, ac.index.unwrap_or(0)).context("configuring the actor")?;
     let role = Role::start(config, "actor").await?;
-    let result = act(config, settings, &role, max_steps).await;
+    let result = async {
+        let index = resolve_index(
+            ac.index,
+            ac.count,
+            ac.eval,
+            &config.transport,
+            &role.shutdown,
+        )
+        .await
+        .context("finding this actor's index")?;
+        let settings = ActorSettings::from_config(ac, index).context("configuring the actor")?;
+        tracing::info!(
+            index,
+            count = settings.count,
+            mode = ?settings.mode,
+            envs = settings.envs,
+            scenario = settings.scenario.name(),
+            action_set = %settings.action_set,
+            transport = ?ac.transport,
+            weights = ?ac.weights_transport(),
+            config = %config.to_toml(),
+            "crossroads actor starting"
+        );
+        act(config, settings, &role, max_steps).await
+    }
+    .await;
     role.finish(result).await
 }
 

@@ -6,6 +6,7 @@ pub mod checkpoints;
 pub mod config;
 pub mod doctor;
 pub mod eval;
+pub mod health;
 pub mod learner;
 pub mod render;
 pub mod replay;

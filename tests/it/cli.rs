@@ -9,6 +9,7 @@ fn crossroads(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_crossroads"))
         .args(args)
         .env_remove("CROSSROADS_CONFIG")
+        .env_remove("CROSSROADS_EXPERIMENT")
         .env_remove("RUST_LOG")
         .output()
         .expect("run crossroads")
@@ -106,6 +107,44 @@ fn config_show_prints_toml_with_layers_applied() {
         shown["actor"]["envs"].as_integer(),
         Some(12),
         "a --set after the subcommand adds to those before it"
+    );
+}
+
+/// A container picks the paper's tuned settings by name, under the
+/// environment and --set; a wrong name lists the right ones.
+#[test]
+fn a_built_in_experiment_is_the_base_of_any_role() {
+    let out = crossroads(&[
+        "--experiment",
+        "sequential-right",
+        "config",
+        "show",
+        "--set",
+        "learner.batch_size=32",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let shown: toml::Value = toml::from_str(&stdout(&out)).expect("stdout is TOML");
+    assert_eq!(shown["actor"]["scenario"].as_str(), Some("right"));
+    assert_eq!(shown["actor"]["action_set"].as_str(), Some("sequential"));
+    assert_eq!(shown["learner"]["max_updates"].as_integer(), Some(120_000));
+    assert_eq!(
+        shown["learner"]["batch_size"].as_integer(),
+        Some(32),
+        "--set wins"
+    );
+
+    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["config", "show"])
+        .env_remove("CROSSROADS_CONFIG")
+        .env("CROSSROADS_EXPERIMENT", "ttg-nowhere")
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("no built-in experiment \"ttg-nowhere\"")
+            && err.contains("ttg-left, ttg-left2"),
+        "{err}"
     );
 }
 

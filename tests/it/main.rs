@@ -2,6 +2,7 @@
 //! one test binary.
 
 mod cli;
+mod deploy;
 mod experiments;
 mod learner;
 mod replay;

@@ -11,14 +11,13 @@ use crossroads_common::{ObservationEncoding, ObservationSpec, Transition, Transi
 
 /// Starts the server and returns it with the address it logged.
 fn start(dir: &std::path::Path) -> (Child, String) {
+    start_with(dir, "telemetry.metrics=false")
+}
+
+/// [`start`] with one more `--set`.
+fn start_with(dir: &std::path::Path, set: &str) -> (Child, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args([
-            "--set",
-            "telemetry.metrics=false",
-            "replay",
-            "--listen",
-            "127.0.0.1:0",
-        ])
+        .args(["--set", set, "replay", "--listen", "127.0.0.1:0"])
         .args(["--no-shm", "--capacity", "100", "--table", "cli"])
         .arg("--snapshot-dir")
         .arg(dir)
@@ -132,6 +131,45 @@ fn replay_serves_until_sigterm_and_restores_its_snapshot() {
         "restored after a restart"
     );
     terminate(child);
+}
+
+/// `crossroads health` (a container's health check) answers for a live
+/// role and fails, naming the URL, once it is gone.
+#[test]
+fn health_follows_the_role_s_liveness() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    let (child, _) = start_with(
+        dir.path(),
+        &format!("telemetry.metrics_addr=127.0.0.1:{port}"),
+    );
+    let health = || {
+        Command::new(env!("CARGO_BIN_EXE_crossroads"))
+            .args(["--set", &format!("telemetry.metrics_addr=0.0.0.0:{port}")])
+            .args(["health", "--timeout-ms", "3000"])
+            .env_remove("CROSSROADS_CONFIG")
+            .output()
+            .expect("crossroads health")
+    };
+    let up = health();
+    assert!(up.status.success(), "{up:?}");
+    assert_eq!(
+        String::from_utf8_lossy(&up.stdout).trim(),
+        format!("ok: http://127.0.0.1:{port}/healthz")
+    );
+    terminate(child);
+    let down = health();
+    assert_eq!(down.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&down.stderr);
+    assert!(
+        err.contains(&format!(
+            "unhealthy: http://127.0.0.1:{port}/healthz: connecting"
+        )),
+        "{err}"
+    );
 }
 
 #[test]

@@ -142,7 +142,9 @@ fn reproduce_refuses_a_config_file() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("--config applies to `crossroads train`"),
+        err.contains(
+            "--config and --experiment (CROSSROADS_EXPERIMENT) apply to `crossroads train`"
+        ),
         "{err}"
     );
 }

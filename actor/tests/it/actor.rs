@@ -2,10 +2,11 @@
 //! per step, the epsilon ladder from the config, greedy evaluation.
 
 use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
-use crossroads_common::{ActorConfig, ConfigLoader};
+use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_common::{ActorConfig, ConfigLoader, Shutdown};
 use crossroads_sim::Outcome;
 
-use crate::util::{actor, actor_config, batches};
+use crate::util::{actor, actor_config, batches, replay_config, transport};
 
 #[test]
 fn training_fills_valid_batches_with_one_forward_pass_per_step() {
@@ -104,14 +105,69 @@ fn the_ladder_comes_from_index_and_count() {
     assert_ne!(a.seed, b.seed, "each actor its own seed");
 }
 
-#[test]
-fn the_index_comes_from_the_config_the_environment_or_the_host_name() {
-    assert_eq!(resolve_index(Some(3), 8, Some("actor-5")), 3);
-    assert_eq!(resolve_index(None, 8, Some("crossroads-actor-5")), 5);
-    assert_eq!(resolve_index(None, 4, Some("actor-6")), 2);
-    assert_eq!(resolve_index(None, 4, Some("3f9c2a")), 0);
-    assert_eq!(resolve_index(None, 4, None), 0);
+/// Without a configured index a training actor asks the replay server,
+/// which hands indices out in order of first request, stable per name.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_index_comes_from_the_config_or_the_replay_server() {
+    let nowhere = transport("http://127.0.0.1:1", "unused");
+    let never = Shutdown::new();
+    assert_eq!(
+        resolve_index(Some(3), 8, false, &nowhere, &never)
+            .await
+            .ok(),
+        Some(3)
+    );
+    assert_eq!(
+        resolve_index(None, 8, true, &nowhere, &never).await.ok(),
+        Some(0),
+        "evaluators take no place"
+    );
+    let stopped = Shutdown::new();
+    stopped.trigger();
+    let e = resolve_index(None, 8, false, &nowhere, &stopped)
+        .await
+        .expect_err("no server");
+    assert!(
+        e.to_string().contains("stopped before the replay server"),
+        "{e}"
+    );
 
+    let servers = Shutdown::new();
+    let replay =
+        crossroads_replay::start(&replay_config("127.0.0.1:0", None), None, servers.clone())
+            .await
+            .expect("replay");
+    let connection = transport(&format!("http://{}", replay.local_addr()), "unused");
+    let client = ReplayClient::new(&connection, "t").expect("client");
+    assert_eq!(client.join_actor("other-0").await.expect("join").index, 0);
+    assert_eq!(client.join_actor("other-1").await.expect("join").index, 1);
+    // This host takes the next place, modulo the count, and keeps it.
+    assert_eq!(
+        resolve_index(None, 8, false, &connection, &never)
+            .await
+            .ok(),
+        Some(2)
+    );
+    assert_eq!(
+        resolve_index(None, 2, false, &connection, &never)
+            .await
+            .ok(),
+        Some(0)
+    );
+    let again = client.join_actor("other-1").await.expect("join");
+    assert_eq!((again.index, again.joined), (1, 3));
+    let bad = client
+        .join_actor("not a name")
+        .await
+        .expect_err("a bad name");
+    assert_eq!(bad.code(), Some(tonic::Code::InvalidArgument));
+    assert!(bad.to_string().contains("name: ' '"), "{bad}");
+    servers.trigger();
+    replay.join().await.expect("replay stops");
+}
+
+#[test]
+fn the_index_and_count_come_from_the_config_or_the_environment() {
     let config = ConfigLoader::new()
         .without_env()
         .sets(["actor.index=2", "actor.count=4", "actor.transport=shm"])

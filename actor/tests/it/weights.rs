@@ -131,11 +131,27 @@ async fn a_running_actor_follows_a_real_learner_over_grpc_and_outlives_it() {
     // The learner goes away: the actor keeps stepping on its last weights.
     learner_stop.trigger();
     learner.join().await.expect("learner stops cleanly");
-    let last = version(&metrics);
     let steps = metrics_steps(&metrics);
     eventually(Duration::from_secs(30), "steps without a learner", || {
         metrics_steps(&metrics) > steps + 500
     })
+    .await;
+    // Weights already on their way when the learner went away (it
+    // publishes a final version as it stops) may still arrive and be
+    // applied; once those are in use the version must stay put.
+    eventually(
+        Duration::from_secs(30),
+        "the last received weights in use",
+        || version(&metrics) == slot.version(),
+    )
+    .await;
+    let last = version(&metrics);
+    let steps = metrics_steps(&metrics);
+    eventually(
+        Duration::from_secs(30),
+        "more steps without a learner",
+        || metrics_steps(&metrics) > steps + 500,
+    )
     .await;
     assert_eq!(version(&metrics), last, "no weights without a learner");
     assert!(

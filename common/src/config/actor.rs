@@ -45,9 +45,11 @@ pub struct ActorConfig {
     /// server's `replay.max_batch_transitions`).
     pub batch_size: usize,
     /// This actor's index i among `count`, for the epsilon ladder and its
-    /// seeds. When unset: the `CROSSROADS_ACTOR__INDEX` variable (as every
-    /// key), else the ordinal at the end of the host name (`actor-3`: 3, as
-    /// Kubernetes StatefulSets name pods) modulo `count`, else 0.
+    /// seeds. When unset (and no `CROSSROADS_ACTOR__INDEX` variable sets
+    /// it, as for every key): a training actor asks the replay server for
+    /// one by its host name (`JoinActor`, in order of first request, stable
+    /// per name) and takes it modulo `count`, as scaled compose services and
+    /// Kubernetes Deployments need; an evaluating actor uses 0.
     pub index: Option<u32>,
     /// Number of actors N in the run. At least 1.
     pub count: u32,

@@ -257,6 +257,17 @@ impl ReplayClient {
         self.bounded(Duration::ZERO, inner.info(request)).await
     }
 
+    /// Asks the server for this actor's index, naming it `name` (see the
+    /// `JoinActor` call).
+    pub async fn join_actor(&self, name: &str) -> Result<pb::JoinActorResponse, ClientError> {
+        let mut inner = self.inner.clone();
+        let request = pb::JoinActorRequest {
+            name: name.to_owned(),
+        };
+        self.bounded(Duration::ZERO, inner.join_actor(request))
+            .await
+    }
+
     /// Asks the server to write a snapshot now; returns its path and size.
     pub async fn snapshot(&self) -> Result<pb::SnapshotResponse, ClientError> {
         let mut inner = self.inner.clone();

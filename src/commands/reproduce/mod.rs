@@ -73,9 +73,10 @@ impl Plan {
             args.budget
         );
         anyhow::ensure!(
-            global.config.is_none(),
+            global.config.is_none() && global.experiment.is_none(),
             "reproduce runs the built-in experiments (configs/experiments/); \
-             --config applies to `crossroads train`, use --set to change a key in every run"
+             --config and --experiment (CROSSROADS_EXPERIMENT) apply to `crossroads train`, \
+             use --set to change a key in every run"
         );
         let parts = if args.only.is_empty() {
             vec![Part::Table1, Part::Table2, Part::Table3, Part::Fig3]
@@ -366,6 +367,7 @@ fn train(plan: &Plan, experiment: &str, shutdown: &Shutdown) -> anyhow::Result<(
 
     let exe = std::env::current_exe().context("finding this program")?;
     let mut cmd = std::process::Command::new(exe);
+    cmd.env_remove("CROSSROADS_EXPERIMENT");
     for set in &plan.sets {
         cmd.arg("--set").arg(set);
     }

@@ -82,6 +82,7 @@ impl TrainArgs {
         if self.resume && global.config.is_none() && saved.exists() {
             loader = loader.file(Some(saved));
         } else if global.config.is_none()
+            && global.experiment.is_none()
             && let Some(e) = self.experiment()
         {
             loader = loader.base(format!("built-in experiment {}", e.name), e.toml);
@@ -797,8 +798,8 @@ fn died(role: &Role, status: std::process::ExitStatus) -> anyhow::Error {
     )
 }
 
-/// Sums every sample of `name` in Prometheus text.
-fn sum_metric(text: &str, name: &str) -> f64 {
+/// Sums every sample of `name` in Prometheus text (0 when there is none).
+pub fn sum_metric(text: &str, name: &str) -> f64 {
     let Ok(scrape) = prometheus_parse::Scrape::parse(text.lines().map(|l| Ok(l.to_owned()))) else {
         return 0.0;
     };

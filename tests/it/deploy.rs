@@ -1,0 +1,675 @@
+//! deploy/ as an operator uses it: the image built from the local base,
+//! `docker compose up` training through real containers, Debian's
+//! Prometheus scraping them with deploy/prometheus.yml, the dashboards'
+//! metric names, and the Kubernetes manifests rendered by kustomize and
+//! checked against the Kubernetes schemas.
+//!
+//! Docker, debootstrap, prometheus/promtool and kubectl come from
+//! scripts/setup-deploy.sh (run by `make test`); the schema validator from
+//! scripts/requirements-test.txt. Without them these tests say so and
+//! pass, unless CROSSROADS_REQUIRE_DOCKER=1 (as `make test` sets), when
+//! they fail naming what is missing.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crossroads::commands::train::sum_metric;
+
+fn repo() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn required() -> bool {
+    std::env::var("CROSSROADS_REQUIRE_DOCKER").is_ok_and(|v| v == "1")
+}
+
+/// Whether `program args` runs and exits 0; when it does not, fails the
+/// test if the deploy tools are required, else prints why it is skipped.
+fn have(program: &str, args: &[&str]) -> bool {
+    let ok = Command::new(program)
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            !required(),
+            "`{program} {}` failed; scripts/setup-deploy.sh installs the deploy tools",
+            args.join(" ")
+        );
+        eprintln!("skipped: `{program} {}` is not available", args.join(" "));
+    }
+    ok
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd.output().unwrap_or_else(|e| panic!("{cmd:?}: {e}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}\n{}{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn text(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+fn crossroads() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_crossroads"));
+    c.env_remove("CROSSROADS_CONFIG")
+        .env_remove("CROSSROADS_EXPERIMENT");
+    c
+}
+
+// ---------------------------------------------------------------------------
+// Dashboards
+
+/// Every `crossroads_*` name in a string literal of the workspace's sources
+/// (tests excluded): the metrics the code registers.
+fn exported_metric_names() -> BTreeSet<String> {
+    let re = regex::Regex::new(r#""(crossroads_[a-z0-9_]+)""#).expect("regex");
+    let mut names = BTreeSet::new();
+    for dir in [
+        "src",
+        "actor/src",
+        "replay/src",
+        "learner/src",
+        "common/src",
+    ] {
+        let mut stack = vec![repo().join(dir)];
+        while let Some(d) = stack.pop() {
+            for entry in std::fs::read_dir(&d).expect("read source dir").flatten() {
+                let path = entry.path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else if path.extension().is_some_and(|e| e == "rs") {
+                    let code = std::fs::read_to_string(&path).expect("read source");
+                    names.extend(re.captures_iter(&code).map(|c| c[1].to_owned()));
+                }
+            }
+        }
+    }
+    names
+}
+
+fn exprs(value: &serde_json::Value, out: &mut Vec<String>) {
+    match value {
+        serde_json::Value::Object(map) => {
+            for (k, v) in map {
+                match (k.as_str(), v) {
+                    ("expr" | "query", serde_json::Value::String(s)) => out.push(s.clone()),
+                    _ => exprs(v, out),
+                }
+            }
+        }
+        serde_json::Value::Array(items) => items.iter().for_each(|v| exprs(v, out)),
+        _ => {}
+    }
+}
+
+/// The metric names a PromQL expression refers to, histogram suffixes
+/// folded into their histogram's name when the code exports that.
+fn referenced(expr: &str, exported: &BTreeSet<String>) -> Vec<String> {
+    let re = regex::Regex::new(r"crossroads_[a-z0-9_]+").expect("regex");
+    re.find_iter(expr)
+        .map(|m| {
+            let name = m.as_str();
+            ["_bucket", "_sum", "_count"]
+                .iter()
+                .find_map(|s| {
+                    name.strip_suffix(s)
+                        .filter(|base| exported.contains(*base) && !exported.contains(name))
+                })
+                .unwrap_or(name)
+                .to_owned()
+        })
+        .collect()
+}
+
+#[test]
+fn dashboards_reference_only_metrics_the_code_exports() {
+    let exported = exported_metric_names();
+    for known in [
+        "crossroads_replay_size_items",
+        "crossroads_learner_updates_total",
+        "crossroads_actor_weights_version",
+    ] {
+        assert!(exported.contains(known), "the scan finds {known}");
+    }
+    let dir = repo().join("deploy/grafana/dashboards");
+    let mut dashboards = 0;
+    let mut used = BTreeSet::new();
+    for entry in std::fs::read_dir(&dir).expect("dashboards").flatten() {
+        let path = entry.path();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("read"))
+                .unwrap_or_else(|e| panic!("{}: not JSON: {e}", path.display()));
+        let mut found = Vec::new();
+        exprs(&json, &mut found);
+        assert!(!found.is_empty(), "{} has no queries", path.display());
+        for expr in found {
+            for name in referenced(&expr, &exported) {
+                assert!(
+                    exported.contains(&name),
+                    "{}: {name} (in {expr:?}) is not a metric the code exports",
+                    path.display()
+                );
+                used.insert(name);
+            }
+        }
+        dashboards += 1;
+    }
+    assert_eq!(dashboards, 4, "training, throughput, replay, weights");
+    // The issue's panels: progress, throughput, replay, weights, errors.
+    for needed in [
+        "crossroads_actor_episodes_total",
+        "crossroads_actor_env_steps_total",
+        "crossroads_replay_inserts_total",
+        "crossroads_replay_samples_total",
+        "crossroads_learner_updates_total",
+        "crossroads_replay_size_items",
+        "crossroads_replay_rate_limiter_waits_total",
+        "crossroads_actor_weights_version",
+        "crossroads_actor_weights_staleness_seconds",
+        "crossroads_replay_rejections_total",
+    ] {
+        assert!(used.contains(needed), "no dashboard shows {needed}");
+    }
+    // And the check itself catches a name the code does not export.
+    assert_eq!(
+        referenced("rate(crossroads_actor_nonsense_total[1m])", &exported),
+        ["crossroads_actor_nonsense_total"]
+    );
+    assert!(!exported.contains("crossroads_actor_nonsense_total"));
+}
+
+// ---------------------------------------------------------------------------
+// Kubernetes
+
+fn validator() -> PathBuf {
+    repo().join(".venv/bin/kubernetes-validate")
+}
+
+#[test]
+fn kubernetes_manifests_render_with_kustomize_and_match_the_schemas() {
+    if !have("kubectl", &["version", "--client"]) {
+        return;
+    }
+    assert!(
+        validator().exists() || !required(),
+        "{} is missing; scripts/setup-python.sh installs it",
+        validator().display()
+    );
+    if !validator().exists() {
+        eprintln!("skipped: no kubernetes-validate");
+        return;
+    }
+    let k8s = repo().join("deploy/k8s");
+    let rendered = text(&run(Command::new("kubectl").arg("kustomize").arg(&k8s)));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("rendered.yaml");
+    std::fs::write(&file, &rendered).expect("write");
+    let out = run(Command::new(validator())
+        .args(["--strict", "--no-warn"])
+        .arg(&file));
+    let report = format!("{}{}", text(&out), String::from_utf8_lossy(&out.stderr));
+    let kinds: BTreeMap<&str, usize> = ["configmap/", "service/", "statefulset/", "deployment/"]
+        .into_iter()
+        .map(|k| (k, report.matches(&format!("resource {k}")).count()))
+        .collect();
+    assert_eq!(
+        kinds,
+        BTreeMap::from([
+            ("configmap/", 1),
+            ("deployment/", 2),
+            ("service/", 2),
+            ("statefulset/", 2)
+        ]),
+        "{report}"
+    );
+    assert!(!report.contains("failed"), "{report}");
+
+    // Replay and learner keep their state on persistent volumes; pods are
+    // annotated for Prometheus; actors scale as a Deployment whose replica
+    // count is the ladder's N in the config.
+    assert_eq!(rendered.matches("volumeClaimTemplates:").count(), 2);
+    assert_eq!(
+        rendered.matches("prometheus.io/scrape: \"true\"").count(),
+        4
+    );
+    let replicas = rendered
+        .split("\n---\n")
+        .find(|d| d.contains("name: crossroads-actor\n") && d.contains("kind: Deployment"))
+        .and_then(|d| d.lines().find_map(|l| l.trim().strip_prefix("replicas: ")))
+        .expect("the actor Deployment's replicas")
+        .to_owned();
+    let config = repo().join("deploy/k8s/config.toml");
+    let shown = text(&run(crossroads().arg("--config").arg(&config).args([
+        "--experiment",
+        "ttg-left",
+        "config",
+        "show",
+    ])));
+    let shown: toml::Value = toml::from_str(&shown).expect("TOML");
+    assert_eq!(
+        shown["actor"]["count"].as_integer().map(|n| n.to_string()),
+        Some(replicas),
+        "config.toml's [actor] count equals the actor replicas"
+    );
+
+    // The validator is not a rubber stamp: a misspelt field fails.
+    let broken = rendered.replacen("containerPort:", "containerPrt:", 1);
+    std::fs::write(&file, broken).expect("write");
+    let out = Command::new(validator())
+        .args(["--strict", "--no-warn"])
+        .arg(&file)
+        .output()
+        .expect("validator");
+    assert!(!out.status.success(), "a misspelt field passes");
+}
+
+// ---------------------------------------------------------------------------
+// Compose
+
+/// `docker compose` when the plugin is there, else `docker-compose`.
+fn compose_program() -> Option<Vec<String>> {
+    let works = |p: &[&str]| {
+        Command::new(p[0])
+            .args(&p[1..])
+            .arg("version")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    [&["docker", "compose"][..], &["docker-compose"][..]]
+        .into_iter()
+        .find(|p| works(p))
+        .map(|p| p.iter().map(|s| (*s).to_owned()).collect())
+}
+
+/// One compose project of this test; `down -v` when dropped, so a failing
+/// test leaves nothing running.
+struct Project {
+    program: Vec<String>,
+    name: String,
+    files: Vec<PathBuf>,
+    env: Vec<(String, String)>,
+}
+
+impl Project {
+    fn command(&self, args: &[&str]) -> Command {
+        let mut c = Command::new(&self.program[0]);
+        c.args(&self.program[1..]).arg("-p").arg(&self.name);
+        for f in &self.files {
+            c.arg("-f").arg(f);
+        }
+        c.args(args).current_dir(repo());
+        for (k, v) in &self.env {
+            c.env(k, v);
+        }
+        c
+    }
+
+    /// Containers of the project by service: (id, address on its network).
+    fn containers(&self) -> BTreeMap<String, Vec<(String, String)>> {
+        let ids = text(&run(Command::new("docker").args([
+            "ps",
+            "-q",
+            "--filter",
+            &format!("label=com.docker.compose.project={}", self.name),
+        ])));
+        let mut by_service: BTreeMap<String, Vec<(String, String)>> = BTreeMap::new();
+        for id in ids.split_whitespace() {
+            let line = text(&run(Command::new("docker").args([
+                "inspect",
+                "-f",
+                "{{index .Config.Labels \"com.docker.compose.service\"}} \
+                 {{range .NetworkSettings.Networks}}{{.IPAddress}}{{end}}",
+                id,
+            ])));
+            let mut parts = line.split_whitespace();
+            if let (Some(service), Some(ip)) = (parts.next(), parts.next()) {
+                by_service
+                    .entry(service.to_owned())
+                    .or_default()
+                    .push((id.to_owned(), ip.to_owned()));
+            }
+        }
+        by_service
+    }
+
+    fn leftovers(&self) -> String {
+        let label = format!("label=com.docker.compose.project={}", self.name);
+        let containers = text(&run(
+            Command::new("docker").args(["ps", "-aq", "--filter", &label])
+        ));
+        let volumes = text(&run(
+            Command::new("docker").args(["volume", "ls", "-q", "--filter", &label])
+        ));
+        let networks = text(&run(
+            Command::new("docker").args(["network", "ls", "-q", "--filter", &label])
+        ));
+        format!("{containers}{volumes}{networks}")
+    }
+}
+
+impl Drop for Project {
+    fn drop(&mut self) {
+        let _ = self.command(&["down", "-v", "--timeout", "20"]).output();
+    }
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+/// The sum of `name`'s samples in a scrape, when it has any.
+fn sample(text: &str, name: &str) -> Option<f64> {
+    text.contains(name).then(|| sum_metric(text, name))
+}
+
+fn scrape(rt: &tokio::runtime::Runtime, ip: &str) -> String {
+    let addr: SocketAddr = format!("{ip}:9100").parse().expect("address");
+    rt.block_on(crossroads_common::metrics::scrape(
+        addr,
+        Duration::from_secs(5),
+    ))
+    .unwrap_or_default()
+}
+
+/// Polls `probe` until it returns `Some`, at most `limit`.
+fn wait_for<T>(what: &str, limit: Duration, mut probe: impl FnMut() -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let Some(v) = probe() {
+            eprintln!(
+                "deploy: {what} after {:.0} s",
+                start.elapsed().as_secs_f64()
+            );
+            return v;
+        }
+        assert!(start.elapsed() < limit, "no {what} within {limit:?}");
+        std::thread::sleep(Duration::from_secs(2));
+    }
+}
+
+/// deploy/prometheus.yml with the compose names replaced by the
+/// containers' addresses (Prometheus runs on the host, outside the compose
+/// network's DNS) and the evaluator's job left out (it is in the
+/// monitoring profile, not started here).
+fn prometheus_config(replay: &str, learner: &str, actors: &[String]) -> String {
+    let original = std::fs::read_to_string(repo().join("deploy/prometheus.yml")).expect("read");
+    let dns_sd = "    dns_sd_configs:\n      - names: ['actor']\n        type: A\n        port: 9100\n        refresh_interval: 15s\n";
+    let evaluator_at = original
+        .find("  # The greedy evaluator")
+        .expect("evaluator job");
+    let mut config = original[..evaluator_at].to_owned();
+    for (from, to) in [
+        ("'replay:9100'", format!("'{replay}:9100'")),
+        ("'learner:9100'", format!("'{learner}:9100'")),
+        (
+            dns_sd,
+            format!(
+                "    static_configs:\n      - targets: [{}]\n",
+                actors
+                    .iter()
+                    .map(|ip| format!("'{ip}:9100'"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        ),
+    ] {
+        assert!(config.contains(from), "deploy/prometheus.yml has {from:?}");
+        config = config.replace(from, &to);
+    }
+    config
+}
+
+fn start_prometheus(config: &Path, data: &Path, port: u16) -> Child {
+    Command::new("prometheus")
+        .arg(format!("--config.file={}", config.display()))
+        .arg(format!("--storage.tsdb.path={}", data.display()))
+        .arg(format!("--web.listen-address=127.0.0.1:{port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start prometheus")
+}
+
+/// (job, health) of every active target Prometheus reports.
+fn targets(rt: &tokio::runtime::Runtime, port: u16) -> Vec<(String, String)> {
+    let addr: SocketAddr = ([127, 0, 0, 1], port).into();
+    let Ok(body) = rt.block_on(crossroads_common::metrics::get(
+        addr,
+        "/api/v1/targets?state=active",
+        Duration::from_secs(5),
+    )) else {
+        return Vec::new();
+    };
+    let json: serde_json::Value = serde_json::from_str(&body).unwrap_or_default();
+    json["data"]["activeTargets"]
+        .as_array()
+        .map(|ts| {
+            ts.iter()
+                .map(|t| {
+                    (
+                        t["labels"]["job"].as_str().unwrap_or("").to_owned(),
+                        t["health"].as_str().unwrap_or("").to_owned(),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
+    if !have("docker", &["info"]) || !have("prometheus", &["--version"]) {
+        return;
+    }
+    let Some(program) = compose_program() else {
+        assert!(
+            !required(),
+            "neither `docker compose` nor `docker-compose` works"
+        );
+        eprintln!("skipped: no docker compose");
+        return;
+    };
+    // promtool accepts the shipped Prometheus config as it is.
+    run(Command::new("promtool")
+        .args(["check", "config", "--syntax-only"])
+        .arg(repo().join("deploy/prometheus.yml")));
+
+    // The image, from the local base and this test build's binary.
+    let tag = format!("crossroads:test-{}", std::process::id());
+    run(Command::new(repo().join("deploy/build-image.sh"))
+        .arg(&tag)
+        .env("CROSSROADS_BIN", env!("CARGO_BIN_EXE_crossroads")));
+    let _image = RemoveImage(tag.clone());
+
+    // Small settings so a debug build trains within a minute on 2 cores.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let overrides = dir.path().join("test.yaml");
+    std::fs::write(
+        &overrides,
+        "x-small: &small\n  CROSSROADS_RUNTIME__COMPUTE_THREADS: \"1\"\n  \
+         CROSSROADS_LEARNER__HIDDEN: \"[64, 64]\"\n  CROSSROADS_LEARNER__BATCH_SIZE: \"32\"\n  \
+         CROSSROADS_ACTOR__ENVS: \"4\"\n  CROSSROADS_REPLAY__SAMPLES_PER_INSERT: \"1.0\"\n\
+         services:\n  replay: {environment: *small}\n  learner: {environment: *small}\n  \
+         actor: {environment: *small}\n",
+    )
+    .expect("write override");
+    let learner_port = free_port();
+    let project = Project {
+        program,
+        name: format!("crossroads-test-{}", std::process::id()),
+        files: vec![repo().join("deploy/compose.yaml"), overrides],
+        env: vec![
+            ("CROSSROADS_IMAGE".into(), tag.clone()),
+            ("ACTORS".into(), "2".into()),
+            ("MIN_SIZE_TO_SAMPLE".into(), "500".into()),
+            ("LEARNER_PORT".into(), learner_port.to_string()),
+        ],
+    };
+    run(&mut project.command(&["up", "-d", "--scale", "actor=2"]));
+
+    let rt = runtime();
+    let containers = wait_for("four running containers", Duration::from_secs(120), || {
+        let c = project.containers();
+        let count = |s: &str| c.get(s).map_or(0, Vec::len);
+        (count("replay") == 1 && count("learner") == 1 && count("actor") == 2).then_some(c)
+    });
+    let ip = |s: &str| containers[s][0].1.clone();
+    let actors: Vec<String> = containers["actor"]
+        .iter()
+        .map(|(_, ip)| ip.clone())
+        .collect();
+
+    // Training through the containers: the replay fills, the learner
+    // updates, both actors act on newer weights, on their own epsilons.
+    let size = |rt: &tokio::runtime::Runtime| {
+        sample(&scrape(rt, &ip("replay")), "crossroads_replay_size_items")
+    };
+    let first_size = wait_for("a filling replay", Duration::from_secs(180), || {
+        size(&rt).filter(|&s| s > 0.0)
+    });
+    let updates = |rt: &tokio::runtime::Runtime| {
+        sample(
+            &scrape(rt, &ip("learner")),
+            "crossroads_learner_updates_total",
+        )
+    };
+    let first_updates = wait_for("learner updates", Duration::from_secs(180), || {
+        updates(&rt).filter(|&u| u > 0.0)
+    });
+    let versions = wait_for(
+        "weights v3+ at both actors",
+        Duration::from_secs(180),
+        || {
+            let v: Vec<f64> = actors
+                .iter()
+                .filter_map(|a| sample(&scrape(&rt, a), "crossroads_actor_weights_version"))
+                .collect();
+            (v.len() == 2 && v.iter().all(|&v| v >= 3.0)).then_some(v)
+        },
+    );
+    let later_updates = wait_for("more learner updates", Duration::from_secs(120), || {
+        updates(&rt).filter(|&u| u > first_updates)
+    });
+    let later_size = wait_for("a larger replay", Duration::from_secs(120), || {
+        size(&rt).filter(|&s| s > first_size)
+    });
+    let mut epsilons: Vec<f64> = actors
+        .iter()
+        .filter_map(|a| sample(&scrape(&rt, a), "crossroads_actor_epsilon"))
+        .collect();
+    epsilons.sort_by(f64::total_cmp);
+    let ladder = [0.4_f64.powi(8), 0.4];
+    assert!(
+        epsilons.len() == 2
+            && epsilons
+                .iter()
+                .zip(ladder)
+                .all(|(e, l)| (e - l).abs() < 1e-9),
+        "the two actors take indices 0 and 1 of the ladder: {epsilons:?}"
+    );
+    eprintln!(
+        "deploy: replay {first_size} -> {later_size} items, learner {first_updates} -> \
+         {later_updates} updates, actors on weights {versions:?}, epsilons {epsilons:?}"
+    );
+
+    // A checkpoint through the gRPC API from outside the containers.
+    let learner_url = format!("http://127.0.0.1:{learner_port}");
+    let saved = text(&run(crossroads().args([
+        "checkpoints",
+        "--learner",
+        &learner_url,
+        "--json",
+        "save",
+    ])));
+    let saved: serde_json::Value = serde_json::from_str(&saved).expect("save prints JSON");
+    let id = saved["id"].as_str().expect("checkpoint id").to_owned();
+    let pulled_dir = dir.path().join("pulled");
+    let pulled = text(&run(crossroads()
+        .args([
+            "checkpoints",
+            "--learner",
+            &learner_url,
+            "--json",
+            "pull",
+            &id,
+            "--out",
+        ])
+        .arg(&pulled_dir)));
+    let pulled: serde_json::Value = serde_json::from_str(&pulled).expect("pull prints JSON");
+    let folder = PathBuf::from(pulled["path"].as_str().expect("path"));
+    let files = std::fs::read_dir(&folder).expect("pulled folder").count();
+    assert!(files >= 2, "{} holds {files} files", folder.display());
+    let eval = text(&run(crossroads()
+        .args(["eval", "--scenario", "left", "--trials", "50", "--policy"])
+        .arg(&folder)));
+    assert!(
+        eval.contains("success"),
+        "the pulled checkpoint evaluates: {eval}"
+    );
+
+    // Debian's Prometheus with deploy/prometheus.yml, targets adjusted:
+    // every role is up.
+    let config = dir.path().join("prometheus.yml");
+    std::fs::write(
+        &config,
+        prometheus_config(&ip("replay"), &ip("learner"), &actors),
+    )
+    .expect("write prometheus.yml");
+    run(Command::new("promtool")
+        .args(["check", "config"])
+        .arg(&config));
+    let port = free_port();
+    let mut prometheus = start_prometheus(&config, &dir.path().join("tsdb"), port);
+    let up = std::panic::catch_unwind(|| {
+        wait_for("every target up", Duration::from_secs(60), || {
+            let t = targets(&rt, port);
+            (t.len() == 4 && t.iter().all(|(_, h)| h == "up")).then_some(t)
+        })
+    });
+    let _ = prometheus.kill();
+    let _ = prometheus.wait();
+    let up = up.unwrap_or_else(|e| std::panic::resume_unwind(e));
+    let jobs: BTreeSet<&str> = up.iter().map(|(j, _)| j.as_str()).collect();
+    assert_eq!(jobs, BTreeSet::from(["actor", "learner", "replay"]));
+
+    // Down with volumes: nothing of the project is left.
+    run(&mut project.command(&["down", "-v", "--timeout", "20"]));
+    assert_eq!(
+        project.leftovers(),
+        "",
+        "containers, volumes or networks left"
+    );
+}
+
+struct RemoveImage(String);
+
+impl Drop for RemoveImage {
+    fn drop(&mut self) {
+        let _ = Command::new("docker").args(["rmi", "-f", &self.0]).output();
+    }
+}
