@@ -156,7 +156,7 @@ pub enum Command {
     ///
     /// Explores with the Ape-X epsilon ladder from its index and the actor
     /// count (or acts greedily with --eval, pushing nothing and reporting
-    /// episodes to the log and metrics); pushes over gRPC (any host) or
+    /// episodes to the metrics and outcome rates to the log); pushes over gRPC (any host) or
     /// iceoryx2 (the replay's host); follows the learner's weights and acts
     /// on the last ones while the learner is unreachable. Configured by the
     /// [actor] and [transport] sections (the first network by [learner]),

@@ -209,7 +209,12 @@ pub struct Actor {
     ready: VecDeque<TransitionBatch>,
     next_obs_id: u64,
     metrics: ActorMetrics,
+    /// Greedy episodes since the last evaluation summary in the log.
+    eval_tally: (std::time::Instant, EpisodeStats),
 }
+
+/// How often an evaluating actor logs its running outcome rates.
+const EVAL_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
 
 impl Actor {
     /// An actor with its environments reset.
@@ -241,6 +246,7 @@ impl Actor {
             ready: VecDeque::new(),
             next_obs_id: 0,
             metrics,
+            eval_tally: (std::time::Instant::now(), EpisodeStats::default()),
             envs,
             settings,
         };
@@ -307,10 +313,9 @@ impl Actor {
             summary.sim_steps += u64::from(r.steps);
             if let Some(end) = r.episode {
                 self.metrics.episode(mode, &end);
-                if training {
-                    tracing::debug!(scenario = self.settings.scenario.name(), outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "episode");
-                } else {
-                    tracing::info!(scenario = self.settings.scenario.name(), outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "evaluation episode");
+                tracing::debug!(scenario = self.settings.scenario.name(), mode, outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "episode");
+                if !training {
+                    self.eval_tally.1.record(&end);
                 }
                 summary.episodes.push(end);
             }
@@ -339,7 +344,32 @@ impl Actor {
         self.metrics
             .transitions_assembled
             .inc_by(summary.transitions);
+        if !training && self.eval_tally.0.elapsed() >= EVAL_LOG_EVERY {
+            self.log_evaluation();
+        }
         Ok(summary)
+    }
+
+    /// Logs the greedy episodes' outcome rates since the last summary (each
+    /// episode is a debug line; at info an evaluator would log thousands a
+    /// second).
+    fn log_evaluation(&mut self) {
+        let (since, tally) = std::mem::replace(
+            &mut self.eval_tally,
+            (std::time::Instant::now(), EpisodeStats::default()),
+        );
+        if tally.episodes() > 0 {
+            tracing::info!(
+                scenario = self.settings.scenario.name(),
+                episodes = tally.episodes(),
+                seconds = since.elapsed().as_secs_f64().round(),
+                success = tally.success_rate(),
+                collision = tally.collision_rate(),
+                timeout = tally.timeout_rate(),
+                mean_time_s = tally.mean_success_time_s(),
+                "greedy evaluation"
+            );
+        }
     }
 
     /// Steps until `shutdown` fires (or `max_steps` steps), handing every

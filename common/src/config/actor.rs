@@ -62,7 +62,8 @@ pub struct ActorConfig {
     /// Ape-X ladder exponent (7). At least 0.
     pub epsilon_alpha: f64,
     /// Greedy evaluation: no exploration, no transitions pushed; episodes
-    /// are reported to the metrics and the log.
+    /// are reported to the metrics (and the log: each at debug level,
+    /// outcome rates every 30 s at info).
     pub eval: bool,
     /// `grpc` or `shm`.
     pub transport: ActorTransport,
