@@ -141,6 +141,23 @@ fn referenced(expr: &str, exported: &BTreeSet<String>) -> Vec<String> {
         .collect()
 }
 
+/// Every dashboard file with its PromQL queries.
+fn dashboard_queries() -> Vec<(PathBuf, Vec<String>)> {
+    let dir = repo().join("deploy/grafana/dashboards");
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(&dir).expect("dashboards").flatten() {
+        let path = entry.path();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).expect("read"))
+                .unwrap_or_else(|e| panic!("{}: not JSON: {e}", path.display()));
+        let mut found = Vec::new();
+        exprs(&json, &mut found);
+        out.push((path, found));
+    }
+    out.sort();
+    out
+}
+
 #[test]
 fn dashboards_reference_only_metrics_the_code_exports() {
     let exported = exported_metric_names();
@@ -151,16 +168,9 @@ fn dashboards_reference_only_metrics_the_code_exports() {
     ] {
         assert!(exported.contains(known), "the scan finds {known}");
     }
-    let dir = repo().join("deploy/grafana/dashboards");
     let mut dashboards = 0;
     let mut used = BTreeSet::new();
-    for entry in std::fs::read_dir(&dir).expect("dashboards").flatten() {
-        let path = entry.path();
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).expect("read"))
-                .unwrap_or_else(|e| panic!("{}: not JSON: {e}", path.display()));
-        let mut found = Vec::new();
-        exprs(&json, &mut found);
+    for (path, found) in dashboard_queries() {
         assert!(!found.is_empty(), "{} has no queries", path.display());
         for expr in found {
             for name in referenced(&expr, &exported) {
@@ -481,6 +491,29 @@ fn targets(rt: &tokio::runtime::Runtime, port: u16) -> Vec<(String, String)> {
         .unwrap_or_default()
 }
 
+/// Runs `query` on Prometheus: `Err` with its message when Prometheus
+/// refuses it, else whether the result holds any series.
+fn query(rt: &tokio::runtime::Runtime, port: u16, query: &str) -> Result<bool, String> {
+    use percent_encoding::{NON_ALPHANUMERIC, utf8_percent_encode};
+    let addr: SocketAddr = ([127, 0, 0, 1], port).into();
+    let path = format!(
+        "/api/v1/query?query={}",
+        utf8_percent_encode(query, NON_ALPHANUMERIC)
+    );
+    let body = rt.block_on(crossroads_common::metrics::get(
+        addr,
+        &path,
+        Duration::from_secs(10),
+    ))?;
+    let json: serde_json::Value = serde_json::from_str(&body).map_err(|e| e.to_string())?;
+    if json["status"] != "success" {
+        return Err(body);
+    }
+    Ok(json["data"]["result"]
+        .as_array()
+        .is_some_and(|r| !r.is_empty()))
+}
+
 #[test]
 fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     if !have("docker", &["info"]) || !have("prometheus", &["--version"]) {
@@ -645,17 +678,57 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
         .arg(&config));
     let port = free_port();
     let mut prometheus = start_prometheus(&config, &dir.path().join("tsdb"), port);
-    let up = std::panic::catch_unwind(|| {
-        wait_for("every target up", Duration::from_secs(60), || {
+    let checked = std::panic::catch_unwind(|| {
+        let up = wait_for("every target up", Duration::from_secs(60), || {
             let t = targets(&rt, port);
             (t.len() == 4 && t.iter().all(|(_, h)| h == "up")).then_some(t)
-        })
+        });
+        // Every dashboard query runs on the real Prometheus; the training
+        // ones find data once a few scrapes are in (the evaluator's, in the
+        // monitoring profile, have none here).
+        wait_for("a minute of scrapes", Duration::from_secs(90), || {
+            query(
+                &rt,
+                port,
+                "count_over_time(crossroads_learner_updates_total[2m]) >= 4",
+            )
+            .ok()
+            .filter(|&some| some)
+        });
+        let mut empty = Vec::new();
+        let mut total = 0;
+        for (path, exprs) in dashboard_queries() {
+            for expr in exprs {
+                total += 1;
+                match query(&rt, port, &expr) {
+                    Ok(true) => {}
+                    Ok(false) => empty.push(expr),
+                    Err(e) => panic!("{}: Prometheus refuses {expr:?}: {e}", path.display()),
+                }
+            }
+        }
+        (up, total, empty)
     });
     let _ = prometheus.kill();
     let _ = prometheus.wait();
-    let up = up.unwrap_or_else(|e| std::panic::resume_unwind(e));
+    let (up, total, empty) = checked.unwrap_or_else(|e| std::panic::resume_unwind(e));
     let jobs: BTreeSet<&str> = up.iter().map(|(j, _)| j.as_str()).collect();
     assert_eq!(jobs, BTreeSet::from(["actor", "learner", "replay"]));
+    eprintln!(
+        "deploy: {total} dashboard queries run, {} with data; empty: {empty:#?}",
+        total - empty.len()
+    );
+    for core in [
+        "crossroads_learner_updates_total",
+        "crossroads_replay_size_items",
+        "crossroads_actor_env_steps_total",
+        "crossroads_actor_weights_version",
+    ] {
+        assert!(
+            !empty.iter().any(|e| e.contains(core)),
+            "a dashboard query on {core} has no data: {empty:#?}"
+        );
+    }
 
     // Down with volumes: nothing of the project is left.
     run(&mut project.command(&["down", "-v", "--timeout", "20"]));
