@@ -172,6 +172,52 @@ fn health_follows_the_role_s_liveness() {
     );
 }
 
+/// A scaled actor asks the replay server for its index; until the server
+/// is up it waits, and SIGTERM meanwhile is a clean stop.
+#[test]
+fn an_actor_waiting_for_its_index_stops_cleanly() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        .args(["--set", "telemetry.metrics=false", "actor"])
+        .args(["--transport", "grpc", "--weights", "grpc"])
+        .args([
+            "--replay",
+            "http://127.0.0.1:1",
+            "--learner",
+            "http://127.0.0.1:1",
+        ])
+        .env_remove("CROSSROADS_CONFIG")
+        .env_remove("CROSSROADS_ACTOR__INDEX")
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn crossroads actor");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let waiting = |rx: &std::sync::mpsc::Receiver<String>, needle: &str| {
+        let start = std::time::Instant::now();
+        while start.elapsed() < Duration::from_secs(30) {
+            if let Ok(line) = rx.recv_timeout(Duration::from_secs(1))
+                && line.contains(needle)
+            {
+                return true;
+            }
+        }
+        false
+    };
+    assert!(waiting(
+        &rx,
+        "waiting for the replay server to hand out an index"
+    ));
+    terminate(child);
+    assert!(waiting(&rx, "actor stopped before it started acting"));
+}
+
 #[test]
 fn replay_flags_are_validated_like_the_config() {
     let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
