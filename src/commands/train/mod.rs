@@ -477,10 +477,16 @@ impl Session {
         let mut steps_per_s = 0.0;
         let mut last_eval = "no evaluation yet".to_owned();
         let mut tick = tokio::time::interval(Duration::from_secs(1));
+        // After a long evaluation, one tick, not a burst of missed ones.
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let end = loop {
+            // Biased: a signal that came during an evaluation wins over the
+            // tick that is due by then (unbiased, select! picked either, so
+            // Ctrl-C could wait several evaluations of a minute each).
             tokio::select! {
-                _ = tick.tick() => {}
+                biased;
                 () = shutdown.wait() => break End::Signal,
+                _ = tick.tick() => {}
             }
             if self.check_roles()? {
                 break End::Budget;
