@@ -16,37 +16,60 @@ fn start(dir: &std::path::Path) -> (Child, String) {
 
 /// [`start`] with one more `--set`.
 fn start_with(dir: &std::path::Path, set: &str) -> (Child, String) {
+    let mut args: Vec<std::ffi::OsString> = [
+        "--set",
+        set,
+        "replay",
+        "--listen",
+        "127.0.0.1:0",
+        "--no-shm",
+        "--capacity",
+        "100",
+        "--table",
+        "cli",
+        "--snapshot-dir",
+    ]
+    .into_iter()
+    .map(Into::into)
+    .collect();
+    args.push(dir.into());
+    let (child, lines) = spawn_logging(&args);
+    let start = std::time::Instant::now();
+    while start.elapsed() < Duration::from_secs(30) {
+        if let Ok(line) = lines.recv_timeout(Duration::from_secs(1))
+            && line.contains("replay server listening")
+            && let Some(addr) = line
+                .split_whitespace()
+                .find_map(|w| w.strip_prefix("addr="))
+        {
+            return (child, addr.to_owned());
+        }
+    }
+    panic!("the server never logged its address");
+}
+
+/// Runs `crossroads args` with its log lines (stderr, info level) sent to
+/// the returned channel.
+fn spawn_logging<S: AsRef<std::ffi::OsStr>>(
+    args: &[S],
+) -> (Child, std::sync::mpsc::Receiver<String>) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(["--set", set, "replay", "--listen", "127.0.0.1:0"])
-        .args(["--no-shm", "--capacity", "100", "--table", "cli"])
-        .arg("--snapshot-dir")
-        .arg(dir)
+        .args(args)
         .env_remove("CROSSROADS_CONFIG")
+        .env_remove("CROSSROADS_ACTOR__INDEX")
         .env("RUST_LOG", "info")
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
         .spawn()
-        .expect("spawn crossroads replay");
+        .expect("spawn crossroads");
     let stderr = child.stderr.take().expect("stderr");
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if let Some(addr) = line
-                .contains("replay server listening")
-                .then(|| {
-                    line.split_whitespace()
-                        .find_map(|w| w.strip_prefix("addr="))
-                })
-                .flatten()
-            {
-                let _ = tx.send(addr.to_owned());
-            }
+            let _ = tx.send(line);
         }
     });
-    let addr = rx
-        .recv_timeout(Duration::from_secs(30))
-        .expect("the server logs its address");
-    (child, addr)
+    (child, rx)
 }
 
 fn terminate(mut child: Child) {
@@ -176,29 +199,19 @@ fn health_follows_the_role_s_liveness() {
 /// is up it waits, and SIGTERM meanwhile is a clean stop.
 #[test]
 fn an_actor_waiting_for_its_index_stops_cleanly() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(["--set", "telemetry.metrics=false", "actor"])
-        .args(["--transport", "grpc", "--weights", "grpc"])
-        .args([
-            "--replay",
-            "http://127.0.0.1:1",
-            "--learner",
-            "http://127.0.0.1:1",
-        ])
-        .env_remove("CROSSROADS_CONFIG")
-        .env_remove("CROSSROADS_ACTOR__INDEX")
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .expect("spawn crossroads actor");
-    let stderr = child.stderr.take().expect("stderr");
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
+    let (child, rx) = spawn_logging(&[
+        "--set",
+        "telemetry.metrics=false",
+        "actor",
+        "--transport",
+        "grpc",
+        "--weights",
+        "grpc",
+        "--replay",
+        "http://127.0.0.1:1",
+        "--learner",
+        "http://127.0.0.1:1",
+    ]);
     let waiting = |rx: &std::sync::mpsc::Receiver<String>, needle: &str| {
         let start = std::time::Instant::now();
         while start.elapsed() < Duration::from_secs(30) {
