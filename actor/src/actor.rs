@@ -94,19 +94,20 @@ pub fn actor_seed(run_seed: u64, index: u32) -> u64 {
 /// for the same name, so a restarted container keeps its place), modulo
 /// `count`; an evaluating actor that has none uses 0 and takes no place on
 /// the ladder. Waits, retrying with backoff, while the replay server is not
-/// up yet; gives up when `shutdown` fires or the server refuses the name.
+/// up yet: `None` when `shutdown` fires meanwhile, an error when the server
+/// refuses the name.
 pub async fn resolve_index(
     configured: Option<u32>,
     count: u32,
     eval: bool,
     connection: &TransportConfig,
     shutdown: &Shutdown,
-) -> Result<u32, ActorError> {
+) -> Result<Option<u32>, ActorError> {
     if let Some(i) = configured {
-        return Ok(i);
+        return Ok(Some(i));
     }
     if eval {
-        return Ok(0);
+        return Ok(Some(0));
     }
     let name = hostname().unwrap_or_else(|| format!("pid-{}", std::process::id()));
     let client = ReplayClient::new(connection, "")?;
@@ -114,11 +115,7 @@ pub async fn resolve_index(
     loop {
         let attempt = tokio::select! {
             r = client.join_actor(&name) => r,
-            () = shutdown.wait() => {
-                return Err(ActorError::Config(
-                    "stopped before the replay server gave this actor an index".to_owned(),
-                ));
-            }
+            () = shutdown.wait() => return Ok(None),
         };
         match attempt {
             Ok(joined) => {
@@ -130,7 +127,7 @@ pub async fn resolve_index(
                     count,
                     "index from the replay server"
                 );
-                return Ok(index);
+                return Ok(Some(index));
             }
             Err(e) if e.is_retryable() => {
                 if backoff.attempts().is_multiple_of(10) {

@@ -29,7 +29,7 @@ async fn serve(config: &Config, max_steps: Option<u64>) -> anyhow::Result<()> {
     ActorSettings::from_config(ac, ac.index.unwrap_or(0)).context("configuring the actor")?;
     let role = Role::start(config, "actor").await?;
     let result = async {
-        let index = match resolve_index(
+        let Some(index) = resolve_index(
             ac.index,
             ac.count,
             ac.eval,
@@ -37,14 +37,11 @@ async fn serve(config: &Config, max_steps: Option<u64>) -> anyhow::Result<()> {
             &role.shutdown,
         )
         .await
-        {
-            Ok(index) => index,
+        .context("finding this actor's index")?
+        else {
             // SIGTERM while the replay server was not up yet: a clean stop.
-            Err(_) if role.shutdown.is_triggered() => {
-                tracing::info!("actor stopped before it started acting");
-                return Ok(());
-            }
-            Err(e) => return Err(e).context("finding this actor's index"),
+            tracing::info!("actor stopped before it started acting");
+            return Ok(());
         };
         let settings = ActorSettings::from_config(ac, index).context("configuring the actor")?;
         tracing::info!(
