@@ -480,6 +480,12 @@ pub struct EvalArgs {
     /// Print one JSON object (rates as fractions) instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Also replay every *go* decision in K other traffic futures (the same
+    /// state, other random draws) and report how likely each was to
+    /// collide: collisions the state already decided are the policy's
+    /// mistakes, the rest its calculated risks (ttg and creep actions).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub risk: Option<u32>,
 }
 
 /// `crossroads tune-ttc`.

@@ -154,6 +154,16 @@ impl Env {
         env
     }
 
+    /// A copy of this environment, now, whose traffic draws from a new
+    /// random stream seeded by `seed`: the same present, another future
+    /// (drivers dawdle and emit cars differently from here on). What
+    /// [`crate::go_risk`] replays a decision in.
+    pub fn fork(&self, seed: u64) -> Self {
+        let mut env = self.clone();
+        env.rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        env
+    }
+
     /// Starts a new episode. The same seed gives the same episode on every
     /// machine (xoshiro256++ seeded by splitmix64).
     pub fn reset(&mut self, seed: u64) {

@@ -119,6 +119,22 @@ pub fn run_trials(
     config: &EvalConfig,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Vec<TrialResult>, SimError> {
+    run_trials_watched(scenario, policy, config, progress, &|_, _, _| Ok(()))
+}
+
+/// What [`run_trials_watched`] calls before each action is applied: the
+/// trial, its environment and the action chosen in it.
+pub(crate) type Watch<'a> = dyn Fn(u64, &Env, usize) -> Result<(), SimError> + Sync + 'a;
+
+/// [`run_trials`], calling `watch` with every decision before it is
+/// applied (from worker threads, in no fixed order across trials).
+pub(crate) fn run_trials_watched(
+    scenario: &Arc<Scenario>,
+    policy: &dyn Policy,
+    config: &EvalConfig,
+    progress: &(dyn Fn(u64) + Sync),
+    watch: &Watch<'_>,
+) -> Result<Vec<TrialResult>, SimError> {
     if config.batch == 0 {
         return Err(SimError::EvalConfig("batch must be at least 1".to_owned()));
     }
@@ -132,7 +148,7 @@ pub fn run_trials(
         .map(|c| {
             let start = c * chunk;
             let end = (start + chunk).min(config.trials);
-            run_chunk(scenario, policy, config, start, end, progress)
+            run_chunk(scenario, policy, config, (start, end), progress, watch)
         })
         .collect::<Result<_, _>>()?;
     Ok(per_chunk.into_iter().flatten().collect())
@@ -142,9 +158,9 @@ fn run_chunk(
     scenario: &Arc<Scenario>,
     policy: &dyn Policy,
     config: &EvalConfig,
-    start: u64,
-    end: u64,
+    (start, end): (u64, u64),
     progress: &(dyn Fn(u64) + Sync),
+    watch: &Watch<'_>,
 ) -> Result<Vec<TrialResult>, SimError> {
     let n = (end - start) as usize;
     let slots = config.batch.min(n);
@@ -166,7 +182,8 @@ fn run_chunk(
     while !envs.is_empty() {
         let live = envs.len();
         policy.act(&envs, &mut rngs, &mut actions[..live])?;
-        for (env, &a) in envs.iter_mut().zip(&actions) {
+        for ((env, &a), &id) in envs.iter_mut().zip(&actions).zip(&ids) {
+            watch(id, env, a)?;
             env.step(a)?;
         }
         let mut i = 0;

@@ -6,7 +6,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use crossroads_sim::{
-    Env, EnvConfig, EvalConfig, EvalReport, Interval, Policy, Scenario, evaluate, parse_policy,
+    Env, EnvConfig, EvalConfig, EvalReport, Interval, Policy, RiskReport, Scenario, evaluate,
+    go_risk, parse_policy,
 };
 use serde::Serialize;
 
@@ -75,16 +76,82 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
     let bar = progress::bar(args.trials, "trials");
     bar.set_message(format!("{} on {}", policy.name(), scenario.name()));
     let start = std::time::Instant::now();
-    let report = evaluate(&scenario, policy.as_ref(), &config, &|n| bar.inc(n))?;
+    let (report, risk) = match args.risk {
+        Some(futures) => {
+            let risk = go_risk(&scenario, policy.as_ref(), &config, futures, &|n| {
+                bar.inc(n)
+            })?;
+            (risk.eval.clone(), Some(risk))
+        }
+        None => (
+            evaluate(&scenario, policy.as_ref(), &config, &|n| bar.inc(n))?,
+            None,
+        ),
+    };
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
 
     if args.json {
-        println!("{}", serde_json::to_string(&json(&report, wall))?);
+        let mut value = serde_json::to_value(json(&report, wall))?;
+        if let (Some(risk), Some(object)) = (&risk, value.as_object_mut()) {
+            object.insert("risk".to_owned(), risk_json(risk)?);
+        }
+        println!("{value}");
     } else {
         print!("{}", text(&report, wall));
+        if let Some(risk) = &risk {
+            print!("{}", risk_text(risk, args.seed));
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The risk part of `--json`: the report without its evaluation (already
+/// at the top level).
+fn risk_json(r: &RiskReport) -> anyhow::Result<serde_json::Value> {
+    let mut value = serde_json::to_value(r)?;
+    if let Some(object) = value.as_object_mut() {
+        object.remove("eval");
+    }
+    Ok(value)
+}
+
+/// The risk table under the evaluation's.
+pub fn risk_text(r: &RiskReport, seed: u64) -> String {
+    let mut out = format!(
+        "  go decisions {}, each replayed in {} other traffic futures\n\
+         \x20   P(collision | state, go)   decisions   collided\n",
+        r.decisions, r.futures
+    );
+    for b in &r.bins {
+        let range = if b.high == 0.0 {
+            "0".to_owned()
+        } else {
+            format!("({:.0}, {:.0} %]", 100.0 * b.low, 100.0 * b.high)
+        };
+        out += &format!("    {range:<26} {:>9}   {:>8}\n", b.decisions, b.collisions);
+    }
+    let after_go: u64 = r.bins.iter().map(|b| b.collisions).sum();
+    out += &format!(
+        "  collisions after a go: {after_go}, of which {} foreseeable (P > 50 %: mistakes), {} chance; \
+         other collisions: {}\n",
+        r.foreseeable,
+        after_go - r.foreseeable,
+        r.other_collisions
+    );
+    if !r.riskiest.is_empty() {
+        out += "  riskiest go decisions (render one with --seed S --trial I --step STEP):\n";
+        for d in &r.riskiest {
+            out += &format!(
+                "    --seed {seed} --trial {:<6} --step {:<4} P = {:5.1} %{}\n",
+                d.trial,
+                d.step,
+                100.0 * d.p_collision,
+                if d.collided { "   collided" } else { "" }
+            );
+        }
+    }
+    out
 }
 
 fn json(r: &EvalReport, wall_seconds: f64) -> JsonReport<'_> {

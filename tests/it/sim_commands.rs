@@ -84,6 +84,72 @@ fn eval_rejects_bad_input_with_a_clear_error() {
 }
 
 #[test]
+fn eval_risk_bins_every_go_and_names_the_riskiest_trials() {
+    let args = [
+        "eval",
+        "--policy",
+        "random",
+        "--scenario",
+        "left",
+        "--trials",
+        "300",
+        "--seed",
+        "4",
+        "--risk",
+        "6",
+    ];
+    let (ok, stdout, stderr) = crossroads(&[&args[..], &["--json"]].concat());
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    let risk = &v["risk"];
+    assert_eq!(risk["futures"], 6, "{v}");
+    let bins = risk["bins"].as_array().expect("bins");
+    let sum = |field: &str| -> u64 { bins.iter().map(|b| b[field].as_u64().expect("count")).sum() };
+    assert_eq!(
+        sum("decisions"),
+        risk["decisions"].as_u64().expect("decisions")
+    );
+    let collisions = (v["collision_rate"].as_f64().expect("rate") * 300.0).round() as u64;
+    assert!(collisions > 0, "a random policy collides: {v}");
+    assert_eq!(
+        sum("collisions") + risk["other_collisions"].as_u64().expect("other"),
+        collisions,
+        "every collision is counted once: {v}"
+    );
+    let riskiest = risk["riskiest"].as_array().expect("riskiest");
+    assert!(!riskiest.is_empty() && riskiest.len() <= 20, "{v}");
+    assert_eq!(
+        riskiest[0]["collided"], true,
+        "collided trials come first: {v}"
+    );
+
+    // The text names the first riskiest trial the way render takes it.
+    let (ok, text, stderr) = crossroads(&args);
+    assert!(ok, "{stderr}");
+    let first = format!("--seed 4 --trial {} ", riskiest[0]["trial"]);
+    assert!(text.contains("P(collision | state, go)"), "{text}");
+    assert!(text.contains(&first), "{first} in\n{text}");
+
+    let (ok, _, stderr) = crossroads(&[
+        "eval",
+        "--policy",
+        "random",
+        "--actions",
+        "sequential",
+        "--risk",
+        "4",
+    ]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("sequential action set has none"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = crossroads(&["eval", "--policy", "random", "--risk", "0"]);
+    assert!(!ok);
+    assert!(stderr.contains("--risk"), "{stderr}");
+}
+
+#[test]
 fn tune_ttc_writes_csv_and_png() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().to_str().expect("utf-8");
