@@ -58,7 +58,7 @@ def batch(n, inputs, actions, gen):
 
 def main():
     p = argparse.ArgumentParser()
-    p.add_argument("--input", type=int, default=1408)
+    p.add_argument("--input", type=int, default=2344)
     p.add_argument("--hidden", default="256,256")
     p.add_argument("--actions", type=int, default=5)
     p.add_argument("--batch", default="64,256")

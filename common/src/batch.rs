@@ -21,7 +21,7 @@ pub const MAX_OBSERVATION_LEN: usize = 1 << 24;
 pub struct ObservationSpec {
     /// Simulator view, e.g. `ttg`.
     pub kind: String,
-    /// Row-major dimensions, e.g. `[18, 26, 3]`.
+    /// Row-major dimensions, e.g. `[18, 26, 5]`.
     pub shape: Vec<u32>,
 }
 
@@ -34,10 +34,10 @@ impl ObservationSpec {
         }
     }
 
-    /// The paper's time-to-go grid: 18 x 26 cells, 3 channels (heading,
-    /// speed, occupancy).
+    /// The time-to-go grid: 18 x 26 cells, 5 channels (occupancy, heading,
+    /// speed, x and y offset in the cell).
     pub fn ttg() -> Self {
-        Self::new("ttg", [18, 26, 3])
+        Self::new("ttg", [18, 26, 5])
     }
 
     /// Number of values of one observation; `None` if the shape is empty or
@@ -617,7 +617,7 @@ mod tests {
 
     #[test]
     fn spec_len_guards_overflow() {
-        assert_eq!(ObservationSpec::ttg().num_values(), Some(1404));
+        assert_eq!(ObservationSpec::ttg().num_values(), Some(2340));
         assert_eq!(
             ObservationSpec::new("x", [u32::MAX, u32::MAX]).num_values(),
             None

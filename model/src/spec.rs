@@ -34,15 +34,16 @@ impl ObservationLayout {
     pub const KINDS: [&'static str; 4] =
         ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
 
-    /// The layout of a simulator view: the TTG grid is 3 x 18 x 26
-    /// (occupied, heading, speed), the Sequential grid 4 x 5 x 11 (plus time
-    /// to collision); `-occlusion` adds three channels (occluded, x and y
-    /// offset). Each is followed by [`EGO_FEATURES`] values.
+    /// The layout of a simulator view: the TTG grid is 5 x 18 x 26
+    /// (occupied, heading, speed, x and y offset in the cell), the
+    /// Sequential grid 6 x 5 x 11 (plus time to collision); `-occlusion`
+    /// adds an occluded channel. Each is followed by [`EGO_FEATURES`]
+    /// values.
     pub fn named(kind: &str) -> Result<Self, ModelError> {
         let (channels, rows, cols) = match kind {
-            "ttg" => (3, 18, 26),
+            "ttg" => (5, 18, 26),
             "ttg-occlusion" => (6, 18, 26),
-            "sequential" => (4, 5, 11),
+            "sequential" => (6, 5, 11),
             "sequential-occlusion" => (7, 5, 11),
             other => {
                 return Err(ModelError::Spec(format!(

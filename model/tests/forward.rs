@@ -205,7 +205,7 @@ mod qnetwork {
                 ("advantage.bias".to_owned(), vec![5]),
                 ("advantage.weight".to_owned(), vec![5, 256]),
                 ("trunk.0.bias".to_owned(), vec![256]),
-                ("trunk.0.weight".to_owned(), vec![256, 3 * 18 * 26 + 4]),
+                ("trunk.0.weight".to_owned(), vec![256, 5 * 18 * 26 + 4]),
                 ("trunk.1.bias".to_owned(), vec![256]),
                 ("trunk.1.weight".to_owned(), vec![256, 256]),
                 ("value.bias".to_owned(), vec![1]),

@@ -19,7 +19,7 @@ use crate::table::{PreparedBatch, Table, TableConfig};
 
 const ROWS: usize = 18;
 const COLS: usize = 26;
-const CHANNELS: usize = 3;
+const CHANNELS: usize = 5;
 
 #[derive(Debug, Clone)]
 struct Car {
@@ -64,7 +64,8 @@ impl SyntheticEpisodes {
             .collect();
     }
 
-    /// The current grid, row-major `[18][26][3]`.
+    /// The current grid, row-major `[18][26][5]` (heading, speed,
+    /// occupied, x offset; the y offset stays 0 on a straight lane).
     pub fn grid(&self) -> Vec<f32> {
         let mut g = vec![0.0; ROWS * COLS * CHANNELS];
         for car in &self.cars {
@@ -74,6 +75,7 @@ impl SyntheticEpisodes {
                 g[cell] = car.heading;
                 g[cell + 1] = car.speed;
                 g[cell + 2] = 1.0;
+                g[cell + 3] = car.col.fract() - 0.5;
             }
         }
         g

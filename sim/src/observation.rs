@@ -55,7 +55,8 @@ pub struct ObsSpec {
     pub cols: usize,
     /// Trailing dense ego features.
     pub ego_features: usize,
-    /// Whether the last three grid channels are occluded, x offset, y offset.
+    /// Whether there is an occluded channel (before the two offsets, which
+    /// are always the last two).
     pub occlusion: bool,
 }
 
@@ -82,12 +83,21 @@ impl ObsSpec {
 }
 
 impl ObsKind {
-    /// The shape, with or without the occlusion channels.
+    /// Car channels (before the occluded flag and the offsets).
+    fn car_channels(self) -> usize {
+        match self {
+            Self::Ttg => 3,
+            Self::Sequential => 4,
+        }
+    }
+
+    /// The shape, with or without the occluded channel: the car channels,
+    /// the occluded flag if `occlusion`, and the two offsets.
     pub fn spec(self, occlusion: bool) -> ObsSpec {
-        let extra = if occlusion { 3 } else { 0 };
-        let (channels, rows, cols) = match self {
-            Self::Ttg => (3 + extra, TTG_ROWS, TTG_COLS),
-            Self::Sequential => (4 + extra, SEQ_ROWS, SEQ_COLS),
+        let channels = self.car_channels() + usize::from(occlusion) + 2;
+        let (rows, cols) = match self {
+            Self::Ttg => (TTG_ROWS, TTG_COLS),
+            Self::Sequential => (SEQ_ROWS, SEQ_COLS),
         };
         ObsSpec {
             kind: self,
@@ -267,10 +277,8 @@ pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), Sim
     out.fill(0.0);
     let frame = Frame::of(env, kind);
     let cells = spec.rows * spec.cols;
-    let base = match kind {
-        ObsKind::Ttg => 3,
-        ObsKind::Sequential => 4,
-    };
+    let base = kind.car_channels();
+    let offsets = base + usize::from(spec.occlusion);
     if spec.occlusion {
         let occ = &mut out[base * cells..(base + 1) * cells];
         for (o, &v) in occ.iter_mut().zip(&env.cell_visible) {
@@ -297,15 +305,13 @@ pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), Sim
         if kind == ObsKind::Sequential {
             out[3 * cells + cell] = (env.car_ttc(car).min(TTC_CAP_S) / TTC_CAP_S) as f32;
         }
-        if spec.occlusion {
-            // x offset along columns, y offset along rows, as in the docs.
-            let (dx, dy) = match kind {
-                ObsKind::Ttg => (dc, -dr),
-                ObsKind::Sequential => (dr, -dc),
-            };
-            out[(base + 1) * cells + cell] = dx as f32;
-            out[(base + 2) * cells + cell] = dy as f32;
-        }
+        // x offset along columns, y offset along rows, as in the docs.
+        let (dx, dy) = match kind {
+            ObsKind::Ttg => (dc, -dr),
+            ObsKind::Sequential => (dr, -dc),
+        };
+        out[offsets * cells + cell] = dx as f32;
+        out[(offsets + 1) * cells + cell] = dy as f32;
     }
     let e = sc.spec();
     let ego = env.ego();

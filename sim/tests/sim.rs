@@ -442,9 +442,9 @@ fn ttg_observation_of_a_constructed_scene() {
     let spec = e.obs_spec();
     assert_eq!(
         (spec.channels, spec.rows, spec.cols, spec.ego_features),
-        (3, 18, 26, 4)
+        (5, 18, 26, 4)
     );
-    assert_eq!(spec.len(), 3 * 18 * 26 + 4);
+    assert_eq!(spec.len(), 5 * 18 * 26 + 4);
     let mut obs = vec![f32::NAN; spec.len()];
     e.write_observation(&mut obs).unwrap();
     assert_eq!(obs[spec.index(0, 9, 8)], 1.0);
@@ -453,8 +453,15 @@ fn ttg_observation_of_a_constructed_scene() {
     assert_eq!(obs[spec.index(0, 8, 19)], 1.0);
     assert_eq!(obs[spec.index(1, 8, 19)], 1.0);
     assert_eq!(obs[spec.index(2, 8, 19)], 0.8);
+    // Offsets from the cell centres in cells: column 8 is centred on
+    // x = -36 and row 9 on y = -1, so (-32.5 + 36) / 8 and (-1.75 + 1) / 2;
+    // column 19 on x = 52 and row 8 on y = 1.
+    assert_eq!(obs[spec.index(3, 9, 8)], 0.4375);
+    assert_eq!(obs[spec.index(4, 9, 8)], -0.375);
+    assert_eq!(obs[spec.index(3, 8, 19)], 0.0625);
+    assert_eq!(obs[spec.index(4, 8, 19)], 0.375);
     let nonzero = obs[..spec.grid_len()].iter().filter(|v| **v != 0.0).count();
-    assert_eq!(nonzero, 5);
+    assert_eq!(nonzero, 9);
     // Ego features: stopped, at the stop line, not committed, step 0.
     assert_eq!(&obs[spec.grid_len()..], &[0.0, 0.0, 0.0, 0.0]);
     e.step(2).unwrap(); // wait 2
@@ -472,11 +479,12 @@ fn sequential_observation_of_a_constructed_scene() {
     e.clear_traffic();
     e.place_car(0, 120.0, 10.0).unwrap();
     let spec = e.obs_spec();
-    assert_eq!((spec.channels, spec.rows, spec.cols), (4, 5, 11));
+    assert_eq!((spec.channels, spec.rows, spec.cols), (6, 5, 11));
     let mut obs = vec![0.0; spec.len()];
     e.write_observation(&mut obs).unwrap();
-    // Sensor at (1.75, -5.5) facing north; the car's centre (-32.5, -1.75)
-    // is 3.75 m ahead (row 0) and 34.25 m to the left:
+    // Sensor at (1.75, -4.5) facing north (the front bumper on left's stop
+    // line, 55.5 m up a path from y = -60); the car's centre (-32.5, -1.75)
+    // is 2.75 m ahead (row 0) and 34.25 m to the left:
     // column floor((90 - 34.25) / (180 / 11)) = 3.
     assert_eq!(obs[spec.index(0, 0, 3)], 1.0);
     assert!(
@@ -488,9 +496,18 @@ fn sequential_observation_of_a_constructed_scene() {
     let ttc = e.car_ttc(&car);
     assert!(ttc > 2.0 && ttc < 3.0, "{ttc}");
     assert!((f64::from(obs[spec.index(3, 0, 3)]) - ttc / 10.0).abs() < 1e-6);
+    // Offsets: (2.75 - 2) / 4 ahead of its row's centre;
+    // the column's centre is (3.5) * 180 / 11 = 57.27 m from the left edge,
+    // the car 90 - 34.25 = 55.75 m: 0.0925 of a column to the left.
+    assert_eq!(obs[spec.index(4, 0, 3)], 0.1875);
+    let left = f64::from(obs[spec.index(5, 0, 3)]);
+    assert!(
+        (left - (57.272_727 - 55.75) / (180.0 / 11.0)).abs() < 1e-5,
+        "{left}"
+    );
     assert_eq!(
         obs[..spec.grid_len()].iter().filter(|v| **v != 0.0).count(),
-        4
+        6
     );
 }
 

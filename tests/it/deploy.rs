@@ -545,7 +545,8 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     std::fs::write(
         &overrides,
         "x-small: &small\n  CROSSROADS_RUNTIME__COMPUTE_THREADS: \"1\"\n  \
-         CROSSROADS_LEARNER__HIDDEN: \"[64, 64]\"\n  CROSSROADS_LEARNER__BATCH_SIZE: \"32\"\n  \
+         CROSSROADS_LEARNER__TRUNK: \"mlp\"\n  CROSSROADS_LEARNER__HIDDEN: \"[64, 64]\"\n  \
+         CROSSROADS_LEARNER__BATCH_SIZE: \"32\"\n  \
          CROSSROADS_ACTOR__ENVS: \"4\"\n  CROSSROADS_REPLAY__SAMPLES_PER_INSERT: \"1.0\"\n\
          services:\n  replay: {environment: *small}\n  learner: {environment: *small}\n  \
          actor: {environment: *small}\n",

@@ -94,7 +94,7 @@ fn terminate(mut child: Child) {
 
 fn batch() -> TransitionBatch {
     let mut b = TransitionBatch::new(ObservationSpec::ttg(), 5, ObservationEncoding::SparseF32);
-    let mut grid = vec![0.0; 18 * 26 * 3];
+    let mut grid = vec![0.0; ObservationSpec::ttg().num_values().expect("a shape")];
     let mut current = b.push_observation(&grid);
     for i in 0..10 {
         grid[i * 3 + 2] = 1.0;

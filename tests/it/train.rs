@@ -21,6 +21,8 @@ fn train(out: &Path, updates: &str, extra: &[&str]) -> Output {
         "--set",
         "telemetry.metrics_addr=127.0.0.1:0",
         "--set",
+        "learner.trunk=mlp",
+        "--set",
         "learner.hidden=[64,64]",
         "--set",
         "replay.min_size_to_sample=500",

@@ -1,5 +1,5 @@
 //! `crossroads bench learner`: updates/s of the configured network (by
-//! default the `[learner]` defaults: dueling MLP 1408-256-256 over the TTG
+//! default the `[learner]` defaults: dueling MLP 2344-256-256 over the TTG
 //! grid, RMSProp) in memory and fed over gRPC, and the same network and
 //! optimizer in PyTorch, measured in the same run.
 

@@ -34,7 +34,8 @@ use crate::progress;
 
 /// Settings `--quick` adds to every run: a small network, short warm-up
 /// and frequent small evaluations.
-const QUICK_SETS: [&str; 6] = [
+const QUICK_SETS: [&str; 7] = [
+    "learner.trunk=mlp",
     "learner.hidden=[64,64]",
     "replay.min_size_to_sample=500",
     "train.eval_every=100",
