@@ -1,7 +1,8 @@
 //! `crossroads train` end to end: the replay, the learner and an actor as
 //! real processes over the real local transport (iceoryx2), a short
-//! budget, and a measured improvement of greedy success over the untrained
-//! network; then `--resume`, and `eval --policy` on the best weights.
+//! budget, and a measured improvement of the greedy evaluation over the
+//! untrained network; then `--resume`, and `eval --policy` on the best
+//! weights.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -59,14 +60,19 @@ fn training_across_real_processes_beats_the_untrained_network() {
     assert!(rows.len() >= 3, "{rows:?}");
     let untrained = &rows[0];
     assert_eq!(untrained.updates, 0, "the first evaluation is of the start");
+    // An untrained network either waits for ever (0 % success, no
+    // collisions) or goes at once (on Right about 90 % success with 10 %
+    // collisions), depending on its initialization; the score that picks
+    // the best weights (success minus ten times collisions) is low either
+    // way, so training must lift it.
     let best = rows
         .iter()
-        .map(|r| r.success_rate)
+        .map(|r| r.score())
         .fold(f64::NEG_INFINITY, f64::max);
     assert!(
-        best >= untrained.success_rate + 0.25,
-        "greedy success went from {:.3} untrained to at best {best:.3}: {rows:?}",
-        untrained.success_rate
+        best >= untrained.score() + 0.25 && best >= 0.5,
+        "the greedy score (success - 10 x collisions) went from {:.3} untrained to at best {best:.3}: {rows:?}",
+        untrained.score()
     );
 
     let s = summary(&out);
