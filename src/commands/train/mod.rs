@@ -525,11 +525,7 @@ impl Session {
                                 e.brief()
                             );
                         });
-                        if self.summary.reached.is_none()
-                            && c.train.met(e.success_rate, e.collision_rate, e.mean_time_s)
-                            && self.confirm(&bar).await?
-                            && c.train.stop_at_target
-                        {
+                        if self.confirm_if_met(&e, &bar).await? && c.train.stop_at_target {
                             break End::Target;
                         }
                     }
@@ -703,6 +699,19 @@ impl Session {
         self.summary.transitions = self.transitions;
     }
 
+    /// `true` when the target is reached for the first time: `e`
+    /// meets it and the best weights confirm it.
+    async fn confirm_if_met(&mut self, e: &Evaluation, bar: &ProgressBar) -> anyhow::Result<bool> {
+        if self.summary.reached.is_some() {
+            return Ok(false);
+        }
+        let c = &self.run.config.train;
+        if !c.met(e.success_rate, e.collision_rate, e.mean_time_s) {
+            return Ok(false);
+        }
+        self.confirm(bar).await
+    }
+
     /// Confirms the target on `confirm_trials` trials of the best weights
     /// (those just evaluated); records when it holds.
     async fn confirm(&mut self, bar: &ProgressBar) -> anyhow::Result<bool> {
@@ -742,7 +751,14 @@ impl Session {
                 .evaluate_latest(self.run.config.train.eval_trials)
                 .await
             {
-                Ok(e) => eprintln!("final evaluation: {}", e.brief()),
+                Ok(e) => {
+                    eprintln!("final evaluation: {}", e.brief());
+                    // A run that ends (budget, minutes, Ctrl-C) on weights
+                    // that meet the target still gets them confirmed.
+                    if let Err(err) = self.confirm_if_met(&e, &ProgressBar::hidden()).await {
+                        tracing::warn!(error = %format!("{err:#}"), "confirming the target");
+                    }
+                }
                 Err(e) => tracing::warn!(error = %format!("{e:#}"), "final evaluation"),
             }
         }
