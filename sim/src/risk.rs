@@ -128,11 +128,22 @@ pub fn go_risk(
     for d in &mut decisions {
         d.collided = results[(d.trial) as usize].outcome == Outcome::Collision;
     }
+    let collisions = results
+        .iter()
+        .filter(|r| r.outcome == Outcome::Collision)
+        .count() as u64;
     let eval = summarize(scenario.name(), &policy.name(), config, &results);
-    Ok(report(eval, futures, decisions))
+    Ok(report(eval, futures, decisions, collisions))
 }
 
-fn report(eval: EvalReport, futures: u32, mut decisions: Vec<GoDecision>) -> RiskReport {
+/// Bins `decisions` and picks the riskiest; `collisions` counts every
+/// collided trial (after a *go* or not).
+fn report(
+    eval: EvalReport,
+    futures: u32,
+    mut decisions: Vec<GoDecision>,
+    collisions: u64,
+) -> RiskReport {
     let mut bins: Vec<RiskBin> = BIN_HIGHS
         .iter()
         .scan(0.0, |low, &high| {
@@ -159,7 +170,6 @@ fn report(eval: EvalReport, futures: u32, mut decisions: Vec<GoDecision>) -> Ris
         .iter()
         .filter(|d| d.collided && d.p_collision > 0.5)
         .count() as u64;
-    let total_collisions = (eval.collision_rate * eval.trials as f64).round() as u64;
     // Collided first, then by probability, then by trial: a fixed order.
     decisions.sort_by(|a, b| {
         b.collided
@@ -176,7 +186,7 @@ fn report(eval: EvalReport, futures: u32, mut decisions: Vec<GoDecision>) -> Ris
         decisions: count,
         bins,
         foreseeable,
-        other_collisions: total_collisions.saturating_sub(collided_after_go),
+        other_collisions: collisions - collided_after_go,
         riskiest: decisions,
     }
 }
