@@ -51,6 +51,7 @@ async fn scrape_and_parse_exposition_text() {
         .expect("start");
     let addr = server.local_addr();
     assert_ne!(addr.port(), 0, "port 0 resolved to a real port");
+    assert!(listening(addr), "{addr} listens while serving");
 
     let (status, content_type, body) = get(addr, "/metrics").await;
     assert_eq!(status, 200);
@@ -106,9 +107,34 @@ async fn scrape_and_parse_exposition_text() {
     tokio::time::timeout(std::time::Duration::from_secs(5), server.join())
         .await
         .expect("server stops on shutdown");
-    // The listener is released: the address can be bound again. (Checking
-    // that a connect fails would race with other tests reusing the port.)
-    std::net::TcpListener::bind(addr).expect("metrics port released after shutdown");
+    // The listener is released. Not checked by binding the address again
+    // or connecting to it: once free, the port may at once be taken by any
+    // other socket on the machine (an outgoing connection's ephemeral port
+    // made such a bind fail in CI), whereas a listener on it is ours.
+    assert!(
+        !listening(addr),
+        "metrics port {addr} still listening after shutdown"
+    );
+}
+
+/// Whether a socket listens on the IPv4 `addr` in this network namespace,
+/// from /proc/net/tcp (local address as hex `IP:PORT`, state 0A = LISTEN).
+fn listening(addr: std::net::SocketAddr) -> bool {
+    let std::net::IpAddr::V4(ip) = addr.ip() else {
+        panic!("{addr} is not IPv4");
+    };
+    // The kernel prints the address in host byte order.
+    let local = format!(
+        "{:08X}:{:04X}",
+        u32::from_ne_bytes(ip.octets()),
+        addr.port()
+    );
+    std::fs::read_to_string("/proc/net/tcp")
+        .expect("/proc/net/tcp")
+        .lines()
+        .skip(1)
+        .map(|line| line.split_whitespace().collect::<Vec<_>>())
+        .any(|f| f.get(1) == Some(&local.as_str()) && f.get(3) == Some(&"0A"))
 }
 
 #[tokio::test]
