@@ -6,13 +6,21 @@
 #
 #   scripts/setup-python.sh           # safetensors, numpy, kubernetes-validate
 #   scripts/setup-python.sh --bench   # ... and torch
+#   scripts/setup-python.sh --sumo    # ... and SUMO (scripts/requirements-sumo.txt)
 set -euo pipefail
 
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 venv="$repo/.venv"
 cache="${CROSSROADS_WHEEL_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/crossroads/wheels}"
 bench=false
-[[ "${1:-}" == "--bench" ]] && bench=true
+sumo=false
+for arg in "$@"; do
+    case "$arg" in
+        --bench) bench=true ;;
+        --sumo) sumo=true ;;
+        *) echo "setup-python: error: unknown option $arg (--bench, --sumo)" >&2; exit 2 ;;
+    esac
+done
 
 say() { echo "setup-python: $*" >&2; }
 die() { echo "setup-python: error: $*" >&2; exit 1; }
@@ -55,5 +63,10 @@ if $bench && ! "$py" -c "import torch" 2>/dev/null; then
     say "installing torch 2.13.0 (several GB with its CUDA dependencies)"
     install --find-links "$cache" -r "$repo/scripts/requirements-bench.txt" \
         || die "could not install torch (is PyPI reachable?)"
+fi
+if $sumo && ! "$py" -c "import libsumo, sumolib" 2>/dev/null; then
+    say "installing SUMO 1.28.0 (eclipse-sumo, libsumo; about 250 MB of wheels)"
+    install --find-links "$cache" -r "$repo/scripts/requirements-sumo.txt" \
+        || die "could not install scripts/requirements-sumo.txt (is PyPI reachable?)"
 fi
 say "python ready: $py"

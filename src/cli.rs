@@ -123,6 +123,17 @@ pub enum Command {
     /// Sweep TTC thresholds on a scenario and find the lowest one with zero
     /// collisions (the paper's tuning rule); CSV and PNG with --out.
     TuneTtc(TuneTtcArgs),
+    /// Check our simulator against SUMO: the same scenarios (SUMO's network
+    /// generated from ours), the same policies (TTC over thresholds, TTC
+    /// with creep on the occlusion family, random, never-go), the same
+    /// metrics, compared cell by cell with intervals.
+    ///
+    /// Needs SUMO in Python (scripts/setup-python.sh --sumo puts the
+    /// eclipse-sumo and libsumo wheels into .venv) and runs from the
+    /// repository root (scripts/sumo_check/). Writes into --out: README.md
+    /// (ours beside SUMO per scenario, the tuned thresholds, the drifts),
+    /// cells.csv, results.json, ttc-curves.png and success.png.
+    SumoCheck(SumoCheckArgs),
     /// Draw one episode of a policy on a scenario: an animated GIF of the
     /// whole episode, or a PNG/SVG of one moment.
     ///
@@ -514,6 +525,54 @@ pub struct TuneTtcArgs {
     /// Folder for tune-ttc[-creep]-<scenario>.csv and .png.
     #[arg(long)]
     pub out: Option<PathBuf>,
+}
+
+/// `crossroads sumo-check`.
+#[derive(Debug, Args)]
+pub struct SumoCheckArgs {
+    /// Comma-separated scenarios [default: right, left, left2, forward,
+    /// challenge, occluded-30, occluded-60, occluded-90; with --quick left,
+    /// challenge].
+    #[arg(long)]
+    pub scenarios: Option<String>,
+    /// TTC thresholds in seconds, start:end:step or a list [default: 0.5,
+    /// 1, 1.25, 1.5, 1.75, 2, 2.5, 3, 4 s; with creep 2.5, 3, 3.25, 3.5,
+    /// 4 s; with --quick 1.5, 2, 3 s].
+    #[arg(long)]
+    pub thresholds: Option<String>,
+    /// Trials per policy and scenario, in each simulator.
+    #[arg(long, short = 'n', default_value_t = 1_000)]
+    pub trials: u64,
+    /// Base seed (ours: trial seeds; SUMO: its --seed, plus the policy's
+    /// position in the list).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// A small check (what make test runs): left and challenge, three
+    /// thresholds and never-go, 300 trials.
+    #[arg(long)]
+    pub quick: bool,
+    /// Exit with status 1 when a gated cell drifts (success, collision or
+    /// time of a TTC policy outside the 99 % interval of the difference).
+    #[arg(long)]
+    pub strict: bool,
+    /// SUMO processes at a time (one scenario each).
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// Python with SUMO [default: $CROSSROADS_PYTHON, else .venv/bin/python3,
+    /// else python3].
+    #[arg(long)]
+    pub python: Option<PathBuf>,
+    /// The SUMO driver [default: scripts/sumo_check/check.py].
+    #[arg(long)]
+    pub script: Option<PathBuf>,
+    /// Folder for the report.
+    #[arg(long, default_value = "reports/sumo")]
+    pub out: PathBuf,
+    /// Keep the working files here: each scenario's export (JSON), its SUMO
+    /// network and routes, and SUMO's trials (JSON lines) [default: a
+    /// temporary folder, removed at the end].
+    #[arg(long)]
+    pub work: Option<PathBuf>,
 }
 
 /// `crossroads render`.

@@ -40,6 +40,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Eval(args) => commands::eval::run(&args),
         Command::Health(args) => commands::health::run(&config, &args),
         Command::TuneTtc(args) => commands::tune_ttc::run(&args),
+        Command::SumoCheck(args) => commands::sumo_check::run(&args),
         Command::Render(args) => commands::render::run(&args),
         Command::Replay(_) => commands::replay::run(&config),
         Command::Bench(args) => commands::bench::run(&config, &args),

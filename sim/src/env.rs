@@ -86,6 +86,11 @@ pub struct EpisodeMetrics {
     /// Seconds of braking, summed over traffic cars (see
     /// [`crate::TrafficParams::brake_threshold`]).
     pub brake_time_s: f64,
+    /// Seconds of brake lights by SUMO's rule, summed over traffic cars
+    /// ([`Traffic::brake_light_time_s`]).
+    pub brake_light_s: f64,
+    /// Seconds before *go* was chosen; `None` while it has not been.
+    pub wait_s: Option<f64>,
 }
 
 /// The ego's longitudinal state along its path.
@@ -116,6 +121,8 @@ pub struct Env {
     foes: Vec<EgoFoe>,
     foe_time: Vec<f64>,
     steps: u32,
+    /// Step at which *go* was chosen.
+    go_step: Option<u32>,
     outcome: Option<Outcome>,
     /// Visibility of each observation cell from the sensor, when the
     /// observation has occlusion channels.
@@ -145,6 +152,7 @@ impl Env {
             foes: vec![EgoFoe::None; n],
             foe_time: vec![0.0; n],
             steps: 0,
+            go_step: None,
             outcome: None,
             cell_visible: vec![true; spec.rows * spec.cols],
             visible_from: None,
@@ -190,6 +198,7 @@ impl Env {
             committed: false,
         };
         self.steps = 0;
+        self.go_step = None;
         self.outcome = None;
         self.visible_from = None;
         self.update_ego_geometry();
@@ -251,6 +260,7 @@ impl Env {
         // Drivers see a go at once, not a step later.
         if control == Control::Go {
             self.ego.committed = true;
+            self.go_step.get_or_insert(self.steps);
         }
         self.update_foes(dt);
         self.move_ego(control, dt);
@@ -349,6 +359,7 @@ impl Env {
                         rear,
                         v,
                         merge: true,
+                        on_junction: true,
                     });
                 }
             }
@@ -416,6 +427,7 @@ impl Env {
                 rear,
                 v,
                 merge: z.merge,
+                on_junction: ego.committed || ego.s > sc.spec().ego.stop_line_s + 1e-9,
             });
         }
     }
@@ -557,6 +569,8 @@ impl Env {
             steps: self.steps,
             time_s: f64::from(self.steps) * self.scenario.dt(),
             brake_time_s: self.traffic.brake_time_s(),
+            brake_light_s: self.traffic.brake_light_time_s(),
+            wait_s: self.go_step.map(|k| f64::from(k) * self.scenario.dt()),
         }
     }
 

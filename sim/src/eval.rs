@@ -60,6 +60,11 @@ pub struct TrialResult {
     pub time_s: f64,
     /// Braking time of traffic, s.
     pub brake_s: f64,
+    /// Brake-light time of traffic by SUMO's rule, s
+    /// ([`crate::Traffic::brake_light_time_s`]).
+    pub brake_light_s: f64,
+    /// Seconds before the ego chose *go*; `None` if it never did.
+    pub wait_s: Option<f64>,
 }
 
 /// What [`evaluate`] measured. Rates are fractions in `[0, 1]`; intervals
@@ -96,6 +101,16 @@ pub struct EvalReport {
     pub mean_brake_s: f64,
     /// Its interval.
     pub mean_brake_ci: Interval,
+    /// Mean brake-light time of traffic per trial by SUMO's rule (all
+    /// trials), s.
+    pub mean_brake_light_s: f64,
+    /// Its interval.
+    pub mean_brake_light_ci: Interval,
+    /// Mean wait before *go* over the trials that went, s; `None` if none
+    /// did.
+    pub mean_wait_s: Option<f64>,
+    /// Its interval.
+    pub mean_wait_ci: Option<Interval>,
 }
 
 /// Runs `config.trials` trials of `policy` on `scenario` on the rayon pool
@@ -198,6 +213,8 @@ fn run_chunk(
                     outcome,
                     time_s: m.time_s,
                     brake_s: m.brake_time_s,
+                    brake_light_s: m.brake_light_s,
+                    wait_s: m.wait_s,
                 });
             }
             progress(1);
@@ -242,8 +259,16 @@ pub fn summarize(
         .map(|r| r.time_s)
         .collect();
     let brakes: Vec<f64> = results.iter().map(|r| r.brake_s).collect();
+    let lights: Vec<f64> = results.iter().map(|r| r.brake_light_s).collect();
+    let waits: Vec<f64> = results.iter().filter_map(|r| r.wait_s).collect();
     let time = mean_ci(&times);
     let brake = mean_ci(&brakes);
+    let light = mean_ci(&lights);
+    let wait = mean_ci(&waits);
+    let zero = Interval {
+        low: 0.0,
+        high: 0.0,
+    };
     EvalReport {
         scenario: scenario.to_owned(),
         policy: policy.to_owned(),
@@ -259,13 +284,11 @@ pub fn summarize(
         mean_time_s: time.map(|t| t.0),
         mean_time_ci: time.map(|t| t.1),
         mean_brake_s: brake.map_or(0.0, |b| b.0),
-        mean_brake_ci: brake.map_or(
-            Interval {
-                low: 0.0,
-                high: 0.0,
-            },
-            |b| b.1,
-        ),
+        mean_brake_ci: brake.map_or(zero, |b| b.1),
+        mean_brake_light_s: light.map_or(0.0, |b| b.0),
+        mean_brake_light_ci: light.map_or(zero, |b| b.1),
+        mean_wait_s: wait.map(|w| w.0),
+        mean_wait_ci: wait.map(|w| w.1),
     }
 }
 
@@ -293,7 +316,8 @@ pub fn wilson(k: u64, n: u64) -> Interval {
     }
 }
 
-fn mean_ci(xs: &[f64]) -> Option<(f64, Interval)> {
+/// Mean of `xs` with its 95 % normal interval; `None` when empty.
+pub fn mean_ci(xs: &[f64]) -> Option<(f64, Interval)> {
     if xs.is_empty() {
         return None;
     }

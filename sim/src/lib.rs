@@ -218,6 +218,7 @@ mod car_following;
 mod env;
 mod error;
 mod eval;
+mod export;
 mod geometry;
 mod observation;
 mod occlusion;
@@ -239,12 +240,18 @@ pub use error::SimError;
 pub use eval::{
     EvalConfig, EvalReport, Interval, TrialResult, evaluate, run_trials, summarize, wilson,
 };
+pub use export::{
+    EgoExport, ExportError, LaneExport, LayoutExport, PATH_STEP, RectExport, ScenarioExport,
+    ZoneExport,
+};
 pub use geometry::{OrientedRect, Pose, Vec2, wrap_angle};
 pub use observation::*;
 pub use occlusion::{ObstacleSpec, OcclusionLayout, OcclusionSpec, Side, line_of_sight};
 pub use params::{EgoParams, Rewards, TrafficParams};
 pub use path::{Path, PathSpec, PieceSpec};
-pub use policy::{Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy};
+pub use policy::{
+    NeverPolicy, Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy,
+};
 pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
 pub use risk::{GoDecision, RISKIEST_SHOWN, RiskBin, RiskReport, go_risk};
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};

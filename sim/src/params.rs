@@ -119,10 +119,21 @@ pub struct EgoParams {
     pub decel: f64,
     /// Top speed on the ego's path, m/s.
     pub max_speed: f64,
-    /// Largest lateral acceleration in turns; sets the speed on arcs, m/s².
-    /// SUMO's netconvert limits junction speeds to the same 5.5 m/s²
-    /// (`junctions.limit-turn-speed`).
+    /// Sets the speed limit of each turn as SUMO's netconvert sets that of
+    /// a junction's internal lane (`junctions.limit-turn-speed`, 5.5 m/s²
+    /// by default; `NBEdge::buildInnerEdges`): `sqrt(lateral_accel x r)`
+    /// with the arc's effective radius
+    /// `r = length / (angle - turn_angle_allowance) + lane_width / 4`, m/s².
+    /// The limit holds while the front
+    /// bumper is on the arc (SUMO limits a vehicle by the lane its front is
+    /// on), and the ego brakes for it in advance.
     pub lateral_accel: f64,
+    /// Angle of a turn that costs no speed, degrees (netconvert's
+    /// `junctions.limit-turn-speed.min-angle`, 15).
+    pub turn_angle_allowance_deg: f64,
+    /// Width of the ego's lane in the turn, m (a quarter of it is added to
+    /// the radius: "permit higher turning speed on wide lanes").
+    pub lane_width: f64,
     /// Target speed of *creep*, m/s.
     pub creep_speed: f64,
 }
@@ -136,6 +147,8 @@ impl Default for EgoParams {
             decel: 4.5,
             max_speed: 15.0,
             lateral_accel: 5.5,
+            turn_angle_allowance_deg: 15.0,
+            lane_width: 3.5,
             creep_speed: 1.0,
         }
     }

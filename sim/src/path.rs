@@ -123,6 +123,21 @@ impl Path {
         }
     }
 
+    /// The arcs of the path: `(start, length, radius)` of each, in
+    /// metres of arc length, in order; the angle turned is
+    /// `length / radius`.
+    pub fn arcs(&self) -> impl Iterator<Item = (f64, f64, f64)> + '_ {
+        self.segments
+            .iter()
+            .enumerate()
+            .filter_map(|(i, seg)| match seg {
+                Segment::Arc { radius, .. } => {
+                    Some((self.starts[i], self.starts[i + 1] - self.starts[i], *radius))
+                }
+                Segment::Line { .. } => None,
+            })
+    }
+
     /// Total arc length, metres.
     pub fn length(&self) -> f64 {
         self.starts[self.segments.len()]

@@ -322,19 +322,26 @@ impl Scenario {
             ));
         }
         let p = &e.params;
-        if ![
-            p.length,
-            p.width,
-            p.accel,
-            p.decel,
-            p.max_speed,
-            p.lateral_accel,
-            p.creep_speed,
-        ]
-        .into_iter()
-        .all(positive)
+        let allowance_ok =
+            p.turn_angle_allowance_deg.is_finite() && p.turn_angle_allowance_deg >= 0.0;
+        if !allowance_ok
+            || ![
+                p.length,
+                p.width,
+                p.accel,
+                p.decel,
+                p.max_speed,
+                p.lateral_accel,
+                p.lane_width,
+                p.creep_speed,
+            ]
+            .into_iter()
+            .all(positive)
         {
-            return Err(SimError::invalid(what, "ego parameters must be positive"));
+            return Err(SimError::invalid(
+                what,
+                "ego parameters must be positive (turn_angle_allowance_deg zero or more)",
+            ));
         }
         let t = &spec.traffic;
         if ![
@@ -502,21 +509,33 @@ fn conflict_zone(
     zone
 }
 
+/// The speed limit of a turn by SUMO's netconvert rule
+/// ([`EgoParams::lateral_accel`]).
+pub(crate) fn turn_speed(length: f64, radius: f64, p: &EgoParams) -> f64 {
+    let angle = length / radius - p.turn_angle_allowance_deg.to_radians();
+    if angle <= 0.0 || length <= 1.0 {
+        return f64::INFINITY;
+    }
+    (p.lateral_accel * (length / angle + 0.25 * p.lane_width)).sqrt()
+}
+
 fn speed_profile(path: &Path, ego: &EgoSpec) -> Vec<f64> {
     let p = &ego.params;
     let n = (path.length() / PROFILE_STEP) as usize + 2;
-    let mut v: Vec<f64> = (0..n)
-        .map(|i| {
+    let mut v = vec![p.max_speed; n];
+    // A turn limits the ego while its front's arc length is on the arc, as
+    // SUMO limits a vehicle by the lane its front is on (its lane position
+    // is the front's, and its internal lane is our arc).
+    for (start, length, radius) in path.arcs() {
+        let cap = turn_speed(length, radius, p);
+        let (lo, hi) = (start, start + length);
+        for (i, vi) in v.iter_mut().enumerate() {
             let s = i as f64 * PROFILE_STEP;
-            // The body spans [s - length, s]; the tightest curve under it
-            // limits the speed.
-            let r = [0.0, 0.5, 1.0]
-                .iter()
-                .map(|f| path.radius_at(s - f * p.length))
-                .fold(f64::INFINITY, f64::min);
-            p.max_speed.min((p.lateral_accel * r).sqrt())
-        })
-        .collect();
+            if s >= lo - PROFILE_STEP && s <= hi {
+                *vi = vi.min(cap);
+            }
+        }
+    }
     for i in (0..n - 1).rev() {
         let reachable = (v[i + 1] * v[i + 1] + 2.0 * CURVE_BRAKE * PROFILE_STEP).sqrt();
         v[i] = v[i].min(reachable);
@@ -563,20 +582,34 @@ mod tests {
     }
 
     #[test]
-    fn speed_profile_slows_for_turns() {
+    fn speed_profile_slows_for_turns_as_sumo_does() {
         let left = Scenario::builtin("left").unwrap();
         let stop = left.spec().ego.stop_line_s;
-        // On the 6.25 m arc: sqrt(5.5 m/s² x 6.25 m) = 5.86 m/s.
-        let on_arc = left.ego_speed_cap(stop + 8.0);
-        assert!((on_arc - 34.375_f64.sqrt()).abs() < 1e-9, "{on_arc}");
+        // The 6.25 m quarter circle, 9.817 m long: netconvert's effective
+        // radius 9.817 / (90 - 15 degrees) + 3.5 / 4 = 8.375 m, and
+        // sqrt(5.5 x 8.375) = 6.787 m/s.
+        let want =
+            (5.5_f64 * (6.25 * std::f64::consts::FRAC_PI_2 / 75f64.to_radians() + 0.875)).sqrt();
+        assert!((want - 6.787).abs() < 1e-3, "{want}");
+        // The arc runs from the stop line to 9.8 m past it.
+        for s in [stop + 0.5, stop + 5.0, stop + 9.5] {
+            let on_arc = left.ego_speed_cap(s);
+            assert!((on_arc - want).abs() < 1e-9, "{s}: {on_arc}");
+        }
+        // Once the front has left the arc the ego may speed up, body still
+        // in the turn or not.
+        assert!(left.ego_speed_cap(stop + 10.5) > want + 0.5);
         // Before the arc the ego may be faster, but not so fast that it
         // could not brake down at 3 m/s² in time.
         let before = left.ego_speed_cap(stop - 10.0);
         assert!(
-            before > on_arc && before * before <= 34.375 + 2.0 * 3.0 * 10.5,
+            before > want && before * before <= want * want + 2.0 * 3.0 * 10.0,
             "{before}"
         );
         assert!(left.ego_speed_cap(left.spec().ego.goal_s + 40.0) > 10.0);
+        // A turn of less than the allowance costs no speed.
+        let p = EgoParams::default();
+        assert_eq!(turn_speed(2.0, 10.0, &p), f64::INFINITY);
     }
 
     #[test]

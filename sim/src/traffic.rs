@@ -86,6 +86,12 @@ pub struct EgoConflict {
     pub v: f64,
     /// The ego ends its route in this lane: once in, it is a leader.
     pub merge: bool,
+    /// The ego is on the junction: past its stop line, or on its way
+    /// after *go*. Drivers in its way then brake as hard as they must, up
+    /// to `emergency_decel`, as SUMO's do for a vehicle on the junction
+    /// (its junction leader); before, they give way with at most
+    /// `yield_decel` or drive on.
+    pub on_junction: bool,
 }
 
 /// Constant deceleration, m/s², that makes a car at speed `v` reach a point
@@ -116,6 +122,7 @@ pub struct Traffic {
     emissions: u64,
     insertions: u64,
     brake_time_s: f64,
+    brake_light_s: f64,
     guard_hits: u64,
 }
 
@@ -133,6 +140,7 @@ impl Traffic {
             emissions: 0,
             insertions: 0,
             brake_time_s: 0.0,
+            brake_light_s: 0.0,
             guard_hits: 0,
         }
     }
@@ -146,6 +154,7 @@ impl Traffic {
         self.emissions = 0;
         self.insertions = 0;
         self.brake_time_s = 0.0;
+        self.brake_light_s = 0.0;
         self.guard_hits = 0;
     }
 
@@ -175,6 +184,18 @@ impl Traffic {
         self.brake_time_s
     }
 
+    /// Seconds of brake lights summed over cars since the last
+    /// [`Traffic::reset_counters`], by SUMO's rule
+    /// (`MSVehicle::setBrakingSignals`): a car's light is on in a step
+    /// whose speed change, dawdling included, is a deceleration above
+    /// `(0.05 + 0.005 v) v` m/s² (a speed-dependent "pseudo friction":
+    /// 1 m/s² at 10 m/s, 3 m/s² at 20 m/s), and whenever it ends the step
+    /// at 0.1 m/s or less (a car halted in a queue shows its brake light).
+    /// Counted within the brake zone, as [`Traffic::brake_time_s`].
+    pub fn brake_light_time_s(&self) -> f64 {
+        self.brake_light_s
+    }
+
     /// How often the last-resort spacing guard had to move a car back
     /// because car following alone would have let it touch its leader.
     /// Stays 0 unless the model is broken; tests check it.
@@ -199,9 +220,10 @@ impl Traffic {
         self.pending.iter().map(|&p| u64::from(p)).sum()
     }
 
-    /// Zeroes the braking time.
+    /// Zeroes the braking times.
     pub fn reset_counters(&mut self) {
         self.brake_time_s = 0.0;
+        self.brake_light_s = 0.0;
     }
 
     /// Advances every car by one step, then emits. `foes[i]` is what lane
@@ -237,10 +259,14 @@ impl Traffic {
                     v_new = v_new.min(safe.max(floor));
                 }
                 car.braking = v_new - car.v < -p.brake_threshold * dt;
-                if car.braking && car.pos.dot(car.pos) <= brake_zone2 {
+                let near = car.pos.dot(car.pos) <= brake_zone2;
+                if car.braking && near {
                     self.brake_time_s += dt;
                 }
                 let v_new = dawdle(v_new, rng.random::<f64>(), dt, p);
+                if near && brake_light(car.v, v_new, dt) {
+                    self.brake_light_s += dt;
+                }
                 leader = Some((car.s, car.v));
                 car.v = v_new;
                 car.s += v_new * dt;
@@ -327,18 +353,27 @@ impl Traffic {
     }
 }
 
+/// SUMO's brake light for a step from speed `v` to `v_new`
+/// (`MSVehicle::setBrakingSignals`): on when the car slows by more than
+/// its pseudo friction `(0.05 + 0.005 v) v` m/s² over the step, or ends it
+/// at 0.1 m/s or less.
+fn brake_light(v: f64, v_new: f64, dt: f64) -> bool {
+    v_new < v - (0.05 + 0.005 * v) * v * dt || v_new <= 0.1
+}
+
 /// Acceleration bound of a car that knows about the ego (`INFINITY` for
 /// none). A car in the way of the ego's passage through its lane, which
 /// would neither be clear before the ego enters nor arrive after it is out
-/// (with `yield_margin_s` either side), gives way if it can with at most
-/// `yield_decel`: it slows just enough to arrive after the ego, stopping
-/// short of the lane if need be. If it cannot, it drives on with the right
-/// of way, until the ego is actually in its lane: then it brakes as hard as
-/// it must, up to `emergency_decel`. A car giving way to an ego about to
-/// merge ahead of it follows it as a leader at its entry, with at most
-/// `yield_decel` unless slowing to the ego's speed before the entry takes
-/// more (then as much as that takes, up to `emergency_decel`). Once in a
-/// merge lane, the ego is followed like any leader.
+/// (with `yield_margin_s` either side), slows just enough to arrive after
+/// the ego, stopping short of the lane if need be, unless it could not stop
+/// short even with `emergency_decel` (then it passes first). Once the ego is on the
+/// junction (past its stop line or gone) it brakes for that as hard as it
+/// must, up to `emergency_decel`, as SUMO's drivers do for a junction
+/// leader (planned with `decel`, finalized down to the emergency
+/// deceleration); before, it gives way only with at most `yield_decel`,
+/// and drives on otherwise. A car giving way to an ego about to merge
+/// ahead of it follows it as a leader at its entry, bounded the same way.
+/// Once in a merge lane, the ego is followed like any leader.
 fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
     if c.merge && c.occupying {
         return if car.s < c.rear {
@@ -367,11 +402,18 @@ fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
         } else {
             (f64::INFINITY, f64::INFINITY)
         };
-        car.yielding = t_clear + p.yield_margin_s > c.t_enter && t_arrive < after;
+        // A driver who could not stop short of the ego's path even with
+        // emergency braking passes first, unless the ego is already in his
+        // lane: starting to brake then only leaves him in the ego's path
+        // later.
+        let can_stop =
+            c.occupying || car.v * car.v <= 2.0 * p.emergency_decel * room.max(0.0);
+        car.yielding = t_clear + p.yield_margin_s > c.t_enter && t_arrive < after && can_stop;
     }
     if !car.yielding {
         return f64::INFINITY;
     }
+    let hard = c.occupying || c.on_junction;
     if c.merge {
         // The ego is about to be its leader, entering at `c.v`. Driving on
         // past it is no option, so a driver who cannot slow to its speed
@@ -383,13 +425,15 @@ fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
         } else {
             0.0
         };
-        return if need > p.yield_decel {
+        return if hard {
+            follow.max(-p.emergency_decel)
+        } else if need > p.yield_decel {
             follow.max(-need.min(p.emergency_decel))
         } else {
             follow.max(-p.yield_decel)
         };
     }
-    let cap = if c.occupying {
+    let cap = if hard {
         p.emergency_decel
     } else {
         p.yield_decel
@@ -500,6 +544,7 @@ mod tests {
             rear: 150.0,
             v: 0.0,
             merge: false,
+            on_junction: occupying,
         })]
     }
 
@@ -518,6 +563,7 @@ mod tests {
             rear: 150.0,
             v: 0.0,
             merge: true,
+            on_junction: true,
         })];
         let mut braked = false;
         for _ in 0..200 {
@@ -577,6 +623,38 @@ mod tests {
         // Gone: it forgets the ego.
         decel(&mut t, &[EgoFoe::None], &mut rng);
         assert!(!t.lanes[0][0].yielding);
+        // 15 m short of an ego that is about to enter, it cannot stop even
+        // with 9 m/s² (13.8 needed): it passes first, without braking.
+        let mut t = lone_car(&s, 135.0, 20.0);
+        let d = decel(&mut t, &crossing(0.5, 3.0, false), &mut rng);
+        assert!(d.abs() < 1e-9 && !t.lanes[0][0].yielding, "{d}");
+    }
+
+    #[test]
+    fn cars_brake_as_hard_as_they_must_for_an_ego_on_the_junction() {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut calm = s.spec().clone();
+        calm.traffic.sigma = 0.0;
+        let calm = Scenario::compile(calm).unwrap();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        // 30 m short of the crossing at 20 m/s, the ego entering in 1 s:
+        // stopping short takes 400 / (2 x 29.5) = 6.78 m/s².
+        let decel = |on_junction: bool, rng: &mut Xoshiro256PlusPlus| {
+            let mut t = lone_car(&s, 120.0, 20.0);
+            let mut foes = crossing(1.0, 4.0, false);
+            if let EgoFoe::Conflict(c) = &mut foes[0] {
+                c.on_junction = on_junction;
+            }
+            t.step(&calm, &foes, rng);
+            (20.0 - t.lanes[0][0].v) / 0.2
+        };
+        // An ego still behind its stop line that pulls out: comfortable
+        // braking at most (SUMO's drivers do not yield to a foe that has
+        // not entered the junction)...
+        assert!((decel(false, &mut rng) - 4.5).abs() < 1e-9);
+        // ...one on the junction is a junction leader: as hard as it takes.
+        let d = decel(true, &mut rng);
+        assert!((d - 400.0 / 59.0).abs() < 0.05, "{d}");
     }
 
     #[test]
@@ -596,6 +674,7 @@ mod tests {
             rear: 150.0,
             v: 5.0,
             merge: true,
+            on_junction: false,
         })];
         let decel = |at: f64, rng: &mut Xoshiro256PlusPlus| {
             let mut t = lone_car(&s, at, 20.0);

@@ -76,6 +76,7 @@ fn idm_follower_stops_at_the_standstill_gap() {
         rear: 130.0,
         v: 0.0,
         merge: true,
+        on_junction: true,
     })];
     let mut min_gap = f64::INFINITY;
     for _ in 0..300 {

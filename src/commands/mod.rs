@@ -12,5 +12,6 @@ pub mod render;
 pub mod replay;
 pub mod reproduce;
 pub mod role;
+pub mod sumo_check;
 pub mod train;
 pub mod tune_ttc;

@@ -1,9 +1,11 @@
 //! Policies that drive environments: the [`Policy`] trait, the baselines
 //! (TTC, TTC with creep, random) and parsing of policy strings.
 
+mod never;
 mod random;
 mod ttc;
 
+pub use never::NeverPolicy;
 pub use random::RandomPolicy;
 pub use ttc::TtcPolicy;
 
@@ -51,6 +53,8 @@ pub enum PolicySpec {
     TtcCreep(f64),
     /// `random`: uniform over the action set.
     Random,
+    /// Never goes ([`NeverPolicy`]).
+    Never,
 }
 
 impl PolicySpec {
@@ -60,6 +64,7 @@ impl PolicySpec {
             Self::Ttc(t) => Box::new(TtcPolicy::new(t, false)),
             Self::TtcCreep(t) => Box::new(TtcPolicy::new(t, true)),
             Self::Random => Box::new(RandomPolicy),
+            Self::Never => Box::new(NeverPolicy),
         }
     }
 }
@@ -72,12 +77,14 @@ impl std::str::FromStr for PolicySpec {
             spec: s.to_owned(),
             problem: problem.to_owned(),
         };
-        if s == "random" {
-            return Ok(Self::Random);
+        match s {
+            "random" => return Ok(Self::Random),
+            "never" => return Ok(Self::Never),
+            _ => {}
         }
         let (kind, value) = s
             .split_once(':')
-            .ok_or_else(|| err("expected ttc:<seconds>, ttc-creep:<seconds> or random"))?;
+            .ok_or_else(|| err("expected ttc:<seconds>, ttc-creep:<seconds>, random or never"))?;
         let t: f64 = value
             .parse()
             .map_err(|_| err("the threshold must be a number of seconds"))?;
@@ -89,7 +96,9 @@ impl std::str::FromStr for PolicySpec {
         match kind {
             "ttc" => Ok(Self::Ttc(t)),
             "ttc-creep" => Ok(Self::TtcCreep(t)),
-            _ => Err(err("expected ttc:<seconds>, ttc-creep:<seconds> or random")),
+            _ => Err(err(
+                "expected ttc:<seconds>, ttc-creep:<seconds>, random or never",
+            )),
         }
     }
 }
@@ -100,6 +109,7 @@ impl std::fmt::Display for PolicySpec {
             Self::Ttc(t) => write!(f, "ttc:{t}"),
             Self::TtcCreep(t) => write!(f, "ttc-creep:{t}"),
             Self::Random => f.write_str("random"),
+            Self::Never => f.write_str("never"),
         }
     }
 }
@@ -124,6 +134,7 @@ mod tests {
             PolicySpec::TtcCreep(3.0)
         );
         assert_eq!("random".parse::<PolicySpec>().unwrap(), PolicySpec::Random);
+        assert_eq!("never".parse::<PolicySpec>().unwrap(), PolicySpec::Never);
         for bad in ["ttc", "ttc:", "ttc:x", "ttc:-1", "ttc:inf", "dqn:3", ""] {
             assert!(bad.parse::<PolicySpec>().is_err(), "{bad}");
         }
