@@ -6,7 +6,7 @@
 CARGO ?= cargo
 RUN_ARGS ?=
 
-.PHONY: all setup pydeps deploydeps build run test lint fmt clean-libtorch bench-learner
+.PHONY: all setup pydeps deploydeps build run test lint fmt clean-libtorch bench-learner sumo-check
 
 all: build
 
@@ -14,9 +14,10 @@ all: build
 setup:
 	@scripts/setup-libtorch.sh
 
-# Python for the tests: .venv with safetensors (scripts/requirements-test.txt).
+# Python for the tests: .venv with safetensors (scripts/requirements-test.txt)
+# and SUMO (scripts/requirements-sumo.txt) for the simulator cross-check.
 pydeps:
-	@scripts/setup-python.sh
+	@scripts/setup-python.sh --sumo
 
 build: setup
 	$(CARGO) build --release --bin crossroads
@@ -33,7 +34,7 @@ deploydeps:
 
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
-	CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 $(CARGO) test --workspace --all-targets --no-fail-fast
+	CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 $(CARGO) test --workspace --all-targets --no-fail-fast
 	$(CARGO) test --workspace --doc
 
 lint: setup
@@ -47,6 +48,13 @@ fmt:
 bench-learner: build
 	@scripts/setup-python.sh --bench
 	./target/release/crossroads bench learner
+
+# Our simulator against SUMO on every scenario of Tables I and II, into
+# reports/sumo (SUMO_ARGS="--trials 2000" and the like pass through).
+SUMO_ARGS ?=
+sumo-check: build
+	@scripts/setup-python.sh --sumo
+	./target/release/crossroads sumo-check $(SUMO_ARGS)
 
 clean-libtorch:
 	rm -rf .libtorch

@@ -229,6 +229,12 @@ pub struct ReproduceArgs {
     /// Leave out DQN-Sequential (its runs are the longest).
     #[arg(long)]
     pub no_sequential: bool,
+    /// Only the baselines: the TTC cells and sweeps, without training or
+    /// evaluating any network (the DQN cells stay empty). For re-measuring
+    /// them after a change of the simulator, where the networks need
+    /// retraining anyway.
+    #[arg(long, conflicts_with = "quick")]
+    pub baselines_only: bool,
     /// A minutes-long smoke version: tiny networks and budgets, 300 trials,
     /// no DQN-Sequential. The numbers mean nothing; the pipeline is real.
     #[arg(long)]

@@ -9,7 +9,8 @@ same policies on our simulator and writes the comparison), or by hand:
         --policies ttc:1.5,ttc:2 --actions ttg --trials 500 --out left.jsonl
 
 Writes one JSON object per trial (policy, trial, outcome, time_s, brake_s,
-wait_s, overlap) to --out and `progress DONE TOTAL` lines to stdout.
+wait_s, overlap, and for a collision `foe`: the speed of the car hit at
+*go* and at contact) to --out and `progress DONE TOTAL` lines to stdout.
 """
 
 import argparse

@@ -195,6 +195,8 @@ def run(traci, export, net, policy, trials, seed, gap_s=10.0, warmup_s=60.0, pro
         odo0 = traci.vehicle.getDistance(ego)
         action, left = None, 0
         outcome, steps, brake, wait_s, geo_overlap = None, 0, 0.0, None, False
+        # Speeds of the cars at go, and of the one hit (diagnostics).
+        speeds_at_go, foe = {}, None
         while outcome is None:
             # Read the world as the policy sees it.
             world.ego = state
@@ -216,6 +218,8 @@ def run(traci, export, net, policy, trials, seed, gap_s=10.0, warmup_s=60.0, pro
                 if action[0] == "go" and not state["committed"]:
                     state["committed"] = True
                     wait_s = steps * dt
+                    speeds_at_go = {vid: traci.vehicle.getSpeed(vid)
+                                    for vid in traci.vehicle.getIDList()}
                     traci.vehicle.setSpeedMode(ego, SPEED_MODE_GO)
                     traci.vehicle.setSpeed(ego, -1)
             # Hold the ego as our simulator does until it goes.
@@ -233,9 +237,14 @@ def run(traci, export, net, policy, trials, seed, gap_s=10.0, warmup_s=60.0, pro
             left -= 1
             traci.simulationStep()
             steps += 1
-            collided = any(
-                c.collider == ego or c.victim == ego for c in traci.simulation.getCollisions()
-            )
+            hits = [c for c in traci.simulation.getCollisions()
+                    if c.collider == ego or c.victim == ego]
+            collided = bool(hits)
+            if hits:
+                c = hits[0]
+                other, v = ((c.victim, c.victimSpeed) if c.collider == ego
+                            else (c.collider, c.colliderSpeed))
+                foe = {"v_go": speeds_at_go.get(other), "v_hit": v}
             alive = ego in traci.vehicle.getIDList()
             if alive:
                 state["s"] = stop_s + traci.vehicle.getDistance(ego) - odo0
@@ -273,6 +282,7 @@ def run(traci, export, net, policy, trials, seed, gap_s=10.0, warmup_s=60.0, pro
             "brake_s": round(brake, 6),
             "wait_s": wait_s,
             "overlap": geo_overlap,
+            "foe": foe,
         })
         if progress:
             progress(trial + 1)

@@ -198,14 +198,13 @@ def build(export, workdir, netconvert="netconvert"):
             f'speedFactor="normc({t["speed_factor_mean"]},{t["speed_factor_dev"]},'
             f'{t["speed_factor_min"]},{t["speed_factor_max"]})" '
             f'lcStrategic="-1" lcCooperative="-1" lcSpeedGain="0" lcKeepRight="0"'
-            + (' jmIgnoreFoeProb="0"' if export["traffic_reacts"] else "")
-            + ">\n"
+            # Traffic that does not react to the ego at the junction ignores
+            # every foe there (the ego is its only one); it still follows an
+            # ego that has merged into its lane, as any leader.
+            + ("" if export["traffic_reacts"] else
+               ' jmIgnoreFoeProb="1" jmIgnoreFoeSpeed="100" jmIgnoreJunctionFoeProb="1"')
+            + "/>\n"
         )
-        if not export["traffic_reacts"]:
-            # Traffic that does not react to the ego at the junction (it
-            # still follows an ego that has merged into its lane).
-            f.write('    <param key="junctionModel.ignoreTypes" value="ego"/>\n')
-        f.write("  </vType>\n")
         f.write(
             f'  <vType id="ego" length="{p["length"]}" width="{p["width"]}" '
             f'accel="{p["accel"]}" decel="{p["decel"]}" emergencyDecel="{t["emergency_decel"]}" '

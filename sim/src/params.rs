@@ -26,12 +26,18 @@ pub struct TrafficParams {
     /// IDM desired time headway `T`, s. Traffic follows the improved IDM
     /// ([`crate::iidm_accel`]), which keeps this headway in platoons; 0.8 s
     /// (a little under SUMO's tau of 1 s) gives a lane a capacity of about
-    /// 0.8 cars/s at the platoon speeds seen, 16 to 17 m/s.
+    /// 0.8 cars/s at the platoon speeds seen, 17 to 18 m/s.
     pub headway: f64,
     /// IDM standstill gap `s0`, m (SUMO's minGap).
     pub min_gap: f64,
     /// IDM acceleration exponent `delta`.
     pub idm_delta: f64,
+    /// Free-road acceleration by Krauss's rule ([`crate::krauss_free_accel`]:
+    /// the full `accel` up to the desired speed, as SUMO's cars) rather than
+    /// IDM's (`accel (1 - (v/v0)^delta)`), which under dawdling left cars
+    /// cruising at 93 % of their desired speed and streams 1 m/s slower
+    /// than SUMO's.
+    pub krauss_free_road: bool,
     /// Mean of the speed factor (desired speed = lane limit x factor).
     pub speed_factor_mean: f64,
     /// Standard deviation of the speed factor.
@@ -89,6 +95,7 @@ impl Default for TrafficParams {
             headway: 0.8,
             min_gap: 2.5,
             idm_delta: 4.0,
+            krauss_free_road: true,
             speed_factor_mean: 1.0,
             speed_factor_dev: 0.1,
             speed_factor_min: 0.2,

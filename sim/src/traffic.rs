@@ -1,12 +1,15 @@
-//! Traffic on the priority road: emission, IDM car following with Krauss
-//! safety and dawdling, and the reaction of drivers to the ego.
+//! Traffic on the priority road: emission, improved-IDM car following with
+//! Krauss's free-road acceleration, safety and dawdling, and the reaction
+//! of drivers to the ego.
 
 use std::collections::VecDeque;
 
 use rand::RngExt;
 use rand_distr::StandardNormal;
 
-use crate::car_following::{dawdle, iidm_accel, krauss_safe_speed};
+use crate::car_following::{
+    dawdle, iidm_accel_with, iidm_free_accel, krauss_free_accel, krauss_safe_speed,
+};
 use crate::error::SimError;
 use crate::geometry::{OrientedRect, Vec2};
 use crate::params::TrafficParams;
@@ -244,9 +247,14 @@ impl Traffic {
                     Some((ls, lv)) => (ls - len - car.s, lv),
                     None => (f64::INFINITY, 0.0),
                 };
-                let mut a = iidm_accel(car.v, car.v_desired, gap, v_lead, p);
+                let a_free = if p.krauss_free_road {
+                    krauss_free_accel(car.v, car.v_desired, dt, p)
+                } else {
+                    iidm_free_accel(car.v, car.v_desired, p)
+                };
+                let mut a = iidm_accel_with(a_free, car.v, car.v_desired, gap, v_lead, p);
                 match foe {
-                    EgoFoe::Conflict(c) => a = a.min(react(car, &c, p)),
+                    EgoFoe::Conflict(c) => a = a.min(react(car, a_free, &c, p)),
                     EgoFoe::None => car.yielding = false,
                 }
                 let floor = (car.v - p.emergency_decel * dt).max(0.0);
@@ -366,18 +374,22 @@ fn brake_light(v: f64, v_new: f64, dt: f64) -> bool {
 /// would neither be clear before the ego enters nor arrive after it is out
 /// (with `yield_margin_s` either side), slows just enough to arrive after
 /// the ego, stopping short of the lane if need be, unless it could not stop
-/// short even with `emergency_decel` (then it passes first). Once the ego is on the
+/// short even with `emergency_decel` and the ego crosses its lane (then it
+/// passes first; behind an ego merging ahead it brakes). Once the ego is on the
 /// junction (past its stop line or gone) it brakes for that as hard as it
 /// must, up to `emergency_decel`, as SUMO's drivers do for a junction
 /// leader (planned with `decel`, finalized down to the emergency
 /// deceleration); before, it gives way only with at most `yield_decel`,
 /// and drives on otherwise. A car giving way to an ego about to merge
 /// ahead of it follows it as a leader at its entry, bounded the same way.
-/// Once in a merge lane, the ego is followed like any leader.
-fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
+/// Once in a merge lane, the ego is followed like any leader. `a_free` is
+/// the car's free-road acceleration.
+fn react(car: &mut Car, a_free: f64, c: &EgoConflict, p: &TrafficParams) -> f64 {
+    let (v, v0) = (car.v, car.v_desired);
+    let follow = |gap: f64| iidm_accel_with(a_free, v, v0, gap, c.v, p);
     if c.merge && c.occupying {
         return if car.s < c.rear {
-            iidm_accel(car.v, car.v_desired, c.rear - car.s, c.v, p)
+            follow(c.rear - car.s)
         } else {
             f64::INFINITY
         };
@@ -405,9 +417,12 @@ fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
         // A driver who could not stop short of the ego's path even with
         // emergency braking passes first, unless the ego is already in his
         // lane: starting to brake then only leaves him in the ego's path
-        // later.
+        // later. Not at a merge: an ego merging ahead drives away along
+        // his lane, and braking lets him fall in behind it (without this,
+        // TTC on Right at 1 s collided 3.5 % of the time, drivers at full
+        // speed into the side of the merging ego; SUMO 0.8 %).
         let can_stop =
-            c.occupying || car.v * car.v <= 2.0 * p.emergency_decel * room.max(0.0);
+            c.merge || c.occupying || car.v * car.v <= 2.0 * p.emergency_decel * room.max(0.0);
         car.yielding = t_clear + p.yield_margin_s > c.t_enter && t_arrive < after && can_stop;
     }
     if !car.yielding {
@@ -419,7 +434,7 @@ fn react(car: &mut Car, c: &EgoConflict, p: &TrafficParams) -> f64 {
         // past it is no option, so a driver who cannot slow to its speed
         // before its entry with comfortable braking brakes as hard as he
         // must.
-        let follow = iidm_accel(car.v, car.v_desired, target - car.s, c.v, p);
+        let follow = follow(target - car.s);
         let need = if car.v > c.v {
             (car.v * car.v - c.v * c.v) / (2.0 * room.max(0.1))
         } else {
@@ -489,27 +504,26 @@ mod tests {
 
     use super::*;
 
-    fn run(scenario: &Scenario, seconds: f64, seed: u64) -> Traffic {
-        let mut t = Traffic::new(scenario);
-        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-        let steps = (seconds / scenario.dt()) as usize;
-        for _ in 0..steps {
-            t.step(scenario, &[], &mut rng);
-        }
-        t
-    }
-
     #[test]
     fn free_flow_speeds_follow_the_speed_factor() {
         let s = Scenario::builtin("challenge").unwrap();
-        let t = run(&s, 60.0, 1);
-        let n = t.len();
-        assert!(n > 20, "{n}");
-        for c in t.cars() {
-            assert!((10.0..=30.0).contains(&c.v_desired), "{c:?}");
-            assert!(c.v <= c.v_desired + 1e-9);
+        // Every car seen on the road at 10 s intervals over two minutes.
+        let mut t = Traffic::new(&s);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+        let mut seen = std::collections::HashMap::new();
+        for i in 1..=(120.0 / s.dt()) as usize {
+            t.step(&s, &[], &mut rng);
+            if i % 50 == 0 {
+                for c in t.cars() {
+                    assert!((10.0..=30.0).contains(&c.v_desired), "{c:?}");
+                    assert!(c.v <= c.v_desired + 1e-9);
+                    seen.insert(c.id, c.v_desired);
+                }
+            }
         }
-        let mean_factor = t.cars().map(|c| c.v_desired / 20.0).sum::<f64>() / n as f64;
+        let n = seen.len();
+        assert!(n > 60, "{n}");
+        let mean_factor = seen.values().map(|v| v / 20.0).sum::<f64>() / n as f64;
         assert!((mean_factor - 1.0).abs() < 0.05, "{mean_factor}");
     }
 
@@ -530,6 +544,38 @@ mod tests {
         place(&mut car, &s.lanes()[0], 5.0);
         t.lanes[0].push_back(car);
         t
+    }
+
+    /// Mean speed of a lone car with a desired speed of 20 m/s from 60 to
+    /// 250 m down a free road (settled after starting at 20 m/s).
+    fn cruising_speed(s: &Scenario) -> f64 {
+        let mut t = lone_car(s, 0.0, 20.0);
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        let (mut sum, mut n) = (0.0, 0);
+        while t.lanes[0].front().is_some_and(|c| c.id == 0 && c.s < 250.0) {
+            t.step(s, &[], &mut rng);
+            if t.lanes[0][0].s > 60.0 {
+                sum += t.lanes[0][0].v;
+                n += 1;
+            }
+        }
+        sum / f64::from(n)
+    }
+
+    #[test]
+    fn free_cars_cruise_at_their_desired_speed_despite_dawdling() {
+        // Krauss's free road: full acceleration back to the desired speed
+        // after each dawdle, so a car loses on average sigma a dt / 2 =
+        // 0.13 m/s (SUMO's cruising speed).
+        let s = Scenario::builtin("forward").unwrap();
+        let krauss = cruising_speed(&s);
+        assert!((krauss - (20.0 - 0.13)).abs() < 0.05, "{krauss}");
+        // IDM's free-road term, a (1 - (v/v0)^4), balances the mean dawdle
+        // sigma a / 2 only at (1 - sigma / 2)^(1/4) = 0.93 of v0.
+        let mut spec = s.spec().clone();
+        spec.traffic.krauss_free_road = false;
+        let idm = cruising_speed(&Scenario::compile(spec).unwrap());
+        assert!((idm - 20.0 * 0.75_f64.powf(0.25)).abs() < 0.3, "{idm}");
     }
 
     /// The ego crossing lane 0 of `forward` between lane coordinates 150
@@ -689,6 +735,11 @@ mod tests {
         // 55 m short: 3.4 m/s² would do; it brakes, no harder than 4.5.
         let d = decel(95.0, &mut rng);
         assert!(d > 0.0 && d <= 4.5 + 1e-9, "{d}");
+        // 15 m short it could not stop short of the entry even with 9 m/s²
+        // (13.8 needed), as the crossing car that passes first; behind a
+        // merging ego it brakes as hard as it can instead.
+        let d = decel(135.0, &mut rng);
+        assert!((d - 9.0).abs() < 1e-9, "{d}");
     }
 
     #[test]

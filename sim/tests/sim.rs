@@ -19,26 +19,19 @@ fn env(name: &str, set: ActionSet) -> Env {
 // ---------------------------------------------------------------- traffic
 
 #[test]
-fn idm_car_reaches_desired_speed_and_dawdles_below_it() {
-    for (sigma, lo, hi) in [(0.0, 0.995, 1.0), (0.5, 0.85, 0.99)] {
+fn car_cruises_at_desired_speed_and_dawdles_just_below_it() {
+    // Krauss's free road: back to the desired speed at up to a = 2.6 m/s²
+    // after each dawdle of up to sigma a dt = 0.26 m/s, so a free car at
+    // 20 m/s averages 20 - 0.13 m/s (0.9935 v0).
+    for (sigma, lo, hi) in [(0.0, 0.9999, 1.0), (0.5, 0.990, 0.997)] {
         let mut spec = Scenario::builtin("forward").unwrap().spec().clone();
         spec.traffic.sigma = sigma;
         for l in &mut spec.lanes {
             l.emission_per_s = Some(0.0);
         }
         let sc = Scenario::compile(spec).unwrap();
-        let mut t = Traffic::new(&sc);
-        t.place(&sc, 0, 10.0, 0.0).unwrap();
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-        // From standstill IDM accelerates at nearly a = 2.6 m/s².
-        t.step(&sc, &[], &mut rng);
-        let v1 = t.lane(0)[0].v;
-        assert!(
-            v1 > 2.6 * 0.2 * (1.0 - sigma) - 1e-9 && v1 <= 0.52 + 1e-9,
-            "{v1}"
-        );
-        // Then cruises; the desired speed of a placed car is its speed, so
-        // reset it to 20 m/s.
+        // The desired speed of a placed car is its speed.
         let mut speeds = Vec::new();
         let mut t = Traffic::new(&sc);
         t.place(&sc, 0, 10.0, 20.0).unwrap();

@@ -28,11 +28,15 @@ struct JsonReport<'a> {
     timeout_rate: f64,
     mean_time_s: Option<f64>,
     mean_brake_s: f64,
+    mean_brake_light_s: f64,
+    mean_wait_s: Option<f64>,
     success_ci95: Interval,
     collision_ci95: Interval,
     timeout_ci95: Interval,
     mean_time_ci95: Option<Interval>,
     mean_brake_ci95: Interval,
+    mean_brake_light_ci95: Interval,
+    mean_wait_ci95: Option<Interval>,
     wall_seconds: f64,
 }
 
@@ -166,11 +170,15 @@ fn json(r: &EvalReport, wall_seconds: f64) -> JsonReport<'_> {
         timeout_rate: r.timeout_rate,
         mean_time_s: r.mean_time_s,
         mean_brake_s: r.mean_brake_s,
+        mean_brake_light_s: r.mean_brake_light_s,
+        mean_wait_s: r.mean_wait_s,
         success_ci95: r.success_ci,
         collision_ci95: r.collision_ci,
         timeout_ci95: r.timeout_ci,
         mean_time_ci95: r.mean_time_ci,
         mean_brake_ci95: r.mean_brake_ci,
+        mean_brake_light_ci95: r.mean_brake_light_ci,
+        mean_wait_ci95: r.mean_wait_ci,
         wall_seconds,
     }
 }
@@ -190,6 +198,10 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
         (Some(t), Some(ci)) => secs(t, ci),
         _ => "      -     (no successful run)".to_owned(),
     };
+    let wait = match (r.mean_wait_s, &r.mean_wait_ci) {
+        (Some(t), Some(ci)) => secs(t, ci),
+        _ => "      -     (never went)".to_owned(),
+    };
     format!(
         "{policy} on {scenario} ({actions} actions), {trials} trials, seed {seed}, {wall:.2} s\n\
          \x20                  value      95 % interval\n\
@@ -197,7 +209,9 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
          \x20 collision    {c}\n\
          \x20 timeout      {t}\n\
          \x20 mean time    {time}   (successful runs)\n\
-         \x20 mean brake   {b}   (traffic braking per run)\n",
+         \x20 mean wait    {wait}   (before go, runs that went)\n\
+         \x20 mean brake   {b}   (traffic braking per run)\n\
+         \x20 brake light  {l}   (per run, SUMO's rule)\n",
         policy = r.policy,
         scenario = r.scenario,
         actions = r.action_set,
@@ -208,5 +222,6 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
         c = pct(r.collision_rate, &r.collision_ci),
         t = pct(r.timeout_rate, &r.timeout_ci),
         b = secs(r.mean_brake_s, &r.mean_brake_ci),
+        l = secs(r.mean_brake_light_s, &r.mean_brake_light_ci),
     )
 }

@@ -9,4 +9,5 @@ mod replay;
 mod reproduce;
 mod setup_libtorch;
 mod sim_commands;
+mod sumo;
 mod train;

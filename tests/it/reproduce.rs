@@ -148,3 +148,45 @@ fn reproduce_refuses_a_config_file() {
         "{err}"
     );
 }
+
+#[test]
+fn baselines_only_measures_ttc_without_training_or_weights() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("report");
+    let o = crossroads(&[
+        "reproduce",
+        "--baselines-only",
+        "--only",
+        "fig3",
+        "--trials",
+        "40",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    // Nothing trained: no run folder, no learning curves.
+    let runs: Vec<_> = std::fs::read_dir(out.join("runs"))
+        .expect("runs/")
+        .collect();
+    assert!(runs.is_empty(), "{runs:?}");
+    assert!(!out.join("curves.png").exists());
+    assert!(
+        std::fs::read(out.join("fig3.png"))
+            .expect("fig3")
+            .starts_with(b"\x89PNG")
+    );
+    let results: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).expect("results"))
+            .expect("JSON");
+    assert_eq!(results["baselines_only"], true);
+    let rows = results["table1"].as_array().expect("rows");
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    for row in rows {
+        // The TTC cell measured on every trial, the DQN cells left empty.
+        assert_eq!(cell_trials(&row["ttc"]), 40, "{row}");
+        assert!(row["ttg"].is_null() && row["sequential"].is_null(), "{row}");
+    }
+    let readme = std::fs::read_to_string(out.join("README.md")).expect("README");
+    assert!(readme.contains("**Baselines only**"), "{readme}");
+}

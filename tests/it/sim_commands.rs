@@ -47,6 +47,8 @@ fn eval_json_has_the_documented_fields_and_ignores_thread_count() {
         "timeout_rate",
         "mean_time_s",
         "mean_brake_s",
+        "mean_brake_light_s",
+        "mean_wait_s",
     ] {
         assert!(one.get(field).is_some(), "{field} missing: {one}");
     }

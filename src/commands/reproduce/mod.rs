@@ -59,6 +59,8 @@ struct Plan {
     trials: u64,
     seed: u64,
     quick: bool,
+    /// Train and evaluate the networks (not `--baselines-only`).
+    dqn: bool,
     budget_minutes: f64,
     updates: Option<u64>,
     actors: Option<u32>,
@@ -94,7 +96,8 @@ impl Plan {
         Ok(Self {
             out: args.out.clone(),
             parts,
-            sequential: !(args.no_sequential || args.quick),
+            sequential: !(args.no_sequential || args.quick || args.baselines_only),
+            dqn: !args.baselines_only,
             trials: if args.quick {
                 args.trials.min(QUICK_TRIALS)
             } else {
@@ -120,6 +123,9 @@ impl Plan {
     /// The experiments to train, cheapest and most used first.
     fn experiments(&self) -> Vec<String> {
         let mut names: Vec<String> = Vec::new();
+        if !self.dqn {
+            return names;
+        }
         let mut add = |n: String| {
             if !names.contains(&n) {
                 names.push(n);
@@ -256,6 +262,8 @@ pub struct Results {
     pub trials: u64,
     pub seed: u64,
     pub quick: bool,
+    /// `--baselines-only`: no network was trained or evaluated.
+    pub baselines_only: bool,
     pub machine: String,
     pub table1: Vec<Row1>,
     pub table2: Vec<Row2>,
@@ -295,6 +303,7 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
         trials: plan.trials,
         seed: plan.seed,
         quick: plan.quick,
+        baselines_only: !plan.dqn,
         machine: super::train::machine(),
         started: now_utc(),
         ..Results::default()
@@ -447,7 +456,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
         |experiment: &str, scenario: &str, actions: ActionSet| -> anyhow::Result<Option<Cell>> {
             stop()?;
             let dir = plan.run_dir(experiment);
-            if !dir.exists() {
+            if !plan.dqn || !dir.exists() {
                 return Ok(None);
             }
             evaluate_network(plan, &dir, scenario, actions)
