@@ -25,6 +25,9 @@ pub struct SweepPoint {
     pub mean_time_s: Option<f64>,
     /// Mean braking time of traffic per trial, s.
     pub mean_brake_s: f64,
+    /// Mean brake-light time of traffic per trial by SUMO's rule, s
+    /// ([`crate::Traffic::brake_light_time_s`]).
+    pub mean_brake_light_s: f64,
 }
 
 /// A sweep and the threshold the paper's rule picks.
@@ -81,6 +84,7 @@ pub fn tune_ttc(
             timeout_rate: r.timeout_rate,
             mean_time_s: r.mean_time_s,
             mean_brake_s: r.mean_brake_s,
+            mean_brake_light_s: r.mean_brake_light_s,
         });
     }
     let best = sweep.iter().find(|p| p.collision_rate == 0.0).copied();

@@ -83,7 +83,7 @@ pub fn parse_thresholds(spec: &str) -> anyhow::Result<Vec<f64>> {
 fn table(r: &TuneReport) -> String {
     let mut out = format!(
         "TTC{} sweep on {} ({} actions), {} trials per threshold, seed {}\n\
-         threshold s  success %  collision %  timeout %  mean time s  mean brake s\n",
+         threshold s  success %  collision %  timeout %  mean time s  mean brake s  brake light s\n",
         if r.creep { " with creep" } else { "" },
         r.scenario,
         r.action_set,
@@ -93,13 +93,14 @@ fn table(r: &TuneReport) -> String {
     for p in &r.sweep {
         let _ = writeln!(
             out,
-            "{:11.2}  {:9.2}  {:11.2}  {:9.2}  {:>11}  {:12.2}",
+            "{:11.2}  {:9.2}  {:11.2}  {:9.2}  {:>11}  {:12.2}  {:13.2}",
             p.threshold,
             100.0 * p.success_rate,
             100.0 * p.collision_rate,
             100.0 * p.timeout_rate,
             p.mean_time_s.map_or("-".to_owned(), |t| format!("{t:.2}")),
-            p.mean_brake_s
+            p.mean_brake_s,
+            p.mean_brake_light_s
         );
     }
     match &r.best {
@@ -120,18 +121,19 @@ fn table(r: &TuneReport) -> String {
 
 fn csv(sweep: &[SweepPoint]) -> String {
     let mut out = String::from(
-        "threshold_s,success_rate,collision_rate,timeout_rate,mean_time_s,mean_brake_s\n",
+        "threshold_s,success_rate,collision_rate,timeout_rate,mean_time_s,mean_brake_s,mean_brake_light_s\n",
     );
     for p in sweep {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{}",
             p.threshold,
             p.success_rate,
             p.collision_rate,
             p.timeout_rate,
             p.mean_time_s.map_or(String::new(), |t| t.to_string()),
-            p.mean_brake_s
+            p.mean_brake_s,
+            p.mean_brake_light_s
         );
     }
     out

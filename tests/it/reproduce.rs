@@ -189,4 +189,6 @@ fn baselines_only_measures_ttc_without_training_or_weights() {
     }
     let readme = std::fs::read_to_string(out.join("README.md")).expect("README");
     assert!(readme.contains("**Baselines only**"), "{readme}");
+    // No claim about DQN cells that were never measured.
+    assert!(!readme.contains("Where the DQNs fall short"), "{readme}");
 }

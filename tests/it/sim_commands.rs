@@ -171,6 +171,7 @@ fn tune_ttc_writes_csv_and_png() {
     let csv = std::fs::read_to_string(dir.path().join("tune-ttc-right.csv")).expect("csv");
     let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
     assert_eq!(rows[0][0], "threshold_s");
+    assert_eq!(rows[0].last(), Some(&"mean_brake_light_s"), "{csv}");
     assert_eq!(rows.len(), 4, "header and three thresholds: {csv}");
     let thresholds: Vec<f64> = rows[1..]
         .iter()

@@ -195,7 +195,7 @@ pub struct Cell {
     pub timeout: f64,
     /// Mean time to goal of successful trials, s.
     pub time: Option<f64>,
-    /// Mean traffic braking per trial, s.
+    /// Mean brake-light time of traffic per trial by SUMO's rule, s.
     pub brake: f64,
 }
 
@@ -208,7 +208,7 @@ impl Cell {
             collision: 100.0 * r.collision_rate,
             timeout: 100.0 * r.timeout_rate,
             time: r.mean_time_s,
-            brake: r.mean_brake_s,
+            brake: r.mean_brake_light_s,
         }
     }
 
@@ -220,7 +220,7 @@ impl Cell {
             collision: 100.0 * p.collision_rate,
             timeout: 100.0 * p.timeout_rate,
             time: p.mean_time_s,
-            brake: p.mean_brake_s,
+            brake: p.mean_brake_light_s,
         }
     }
 }
