@@ -3,8 +3,11 @@
 //! ready while the previous update runs, [`spawn_priority_sender`] sends
 //! priority updates without making the training loop wait.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+use crossroads_common::config::LearnerConfig;
 use crossroads_common::transport::grpc::ReplayClient;
 use crossroads_common::{Backoff, Shutdown};
 use crossroads_model::NetworkSpec;
@@ -23,13 +26,55 @@ pub type Prefetched = Result<TrainingBatch, LearnerError>;
 /// is asked again (so shutdown and logs stay timely).
 const SAMPLE_WAIT: Duration = Duration::from_secs(1);
 
+/// The importance-sampling exponent over a run: linear from `start` to
+/// `end` over `updates` updates, then `end` (Schaul et al.'s anneal to 1:
+/// with stochastic outcomes, a beta below 1 leaves Q biased towards the
+/// outcomes prioritized replay oversamples).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BetaSchedule {
+    /// Beta at update 0.
+    pub start: f64,
+    /// Beta from `updates` on.
+    pub end: f64,
+    /// Length of the anneal; 0 keeps `start`.
+    pub updates: u64,
+}
+
+impl BetaSchedule {
+    /// `[learner]`'s schedule: `importance_beta` to `importance_beta_final`
+    /// over `importance_beta_updates`, or over `max_updates` when that is 0.
+    pub fn from_config(c: &LearnerConfig) -> Self {
+        let updates = match c.importance_beta_updates {
+            0 => c.max_updates,
+            n => n,
+        };
+        Self {
+            start: c.importance_beta,
+            end: c.importance_beta_final,
+            updates,
+        }
+    }
+
+    /// Beta after `step` updates.
+    pub fn at(&self, step: u64) -> f32 {
+        if self.updates == 0 {
+            return self.start as f32;
+        }
+        let f = (step as f64 / self.updates as f64).min(1.0);
+        (self.start + f * (self.end - self.start)) as f32
+    }
+}
+
 /// What the prefetcher asks for.
 #[derive(Debug, Clone)]
 pub struct PrefetchConfig {
     /// Transitions per batch.
     pub batch_size: u32,
-    /// Importance exponent.
-    pub beta: f32,
+    /// Importance exponent over the run.
+    pub beta: BetaSchedule,
+    /// Updates applied so far (the training thread's count), which picks
+    /// beta for each request.
+    pub steps: Arc<AtomicU64>,
     /// Batches kept ready.
     pub depth: usize,
     /// The network the batches must fit.
@@ -53,7 +98,7 @@ pub fn spawn_prefetch(
         loop {
             let sampled = tokio::select! {
                 _ = shutdown.wait() => break,
-                r = client.sample(config.batch_size, config.beta, SAMPLE_WAIT) => r,
+                r = client.sample(config.batch_size, config.beta.at(config.steps.load(Ordering::Relaxed)), SAMPLE_WAIT) => r,
             };
             match sampled {
                 Ok(sampled) => {
@@ -148,4 +193,29 @@ pub fn spawn_priority_sender(
         }
     });
     (tx, task)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beta_anneals_linearly_then_holds() {
+        let mut c = LearnerConfig {
+            max_updates: 1000,
+            ..LearnerConfig::default()
+        };
+        let s = BetaSchedule::from_config(&c);
+        assert_eq!((s.start, s.end, s.updates), (0.4, 1.0, 1000));
+        assert!((s.at(0) - 0.4).abs() < 1e-6);
+        assert!((s.at(500) - 0.7).abs() < 1e-6);
+        assert!((s.at(1000) - 1.0).abs() < 1e-6);
+        assert!((s.at(5000) - 1.0).abs() < 1e-6);
+        // Its own span wins over max_updates; with neither, beta stays.
+        c.importance_beta_updates = 100;
+        assert!((BetaSchedule::from_config(&c).at(50) - 0.7).abs() < 1e-6);
+        c.importance_beta_updates = 0;
+        c.max_updates = 0;
+        assert!((BetaSchedule::from_config(&c).at(10_000) - 0.4).abs() < 1e-6);
+    }
 }

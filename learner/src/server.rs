@@ -10,6 +10,7 @@
 
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::transport::grpc::ReplayClient;
@@ -26,7 +27,7 @@ use crate::LearnerError;
 use crate::broadcast::WeightsHub;
 use crate::checkpoint::CheckpointStore;
 use crate::metrics::LearnerMetrics;
-use crate::sampler::{PrefetchConfig, spawn_prefetch, spawn_priority_sender};
+use crate::sampler::{BetaSchedule, PrefetchConfig, spawn_prefetch, spawn_priority_sender};
 use crate::service::LearnerService;
 use crate::trainer::TrainerConfig;
 use crate::training::{Learner, LoopInputs, Shared, StatusView};
@@ -112,6 +113,7 @@ pub async fn start(
         config: config.clone(),
         metrics: metrics.clone(),
         started: Instant::now(),
+        steps: Arc::new(AtomicU64::new(0)),
     });
 
     let listener = TcpListener::bind(lc.listen)
@@ -126,7 +128,8 @@ pub async fn start(
         client.clone(),
         PrefetchConfig {
             batch_size: lc.batch_size,
-            beta: lc.importance_beta as f32,
+            beta: BetaSchedule::from_config(lc),
+            steps: Arc::clone(&shared.steps),
             depth: lc.prefetch as usize,
             spec,
         },

@@ -5,6 +5,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::{Config, Shutdown};
@@ -80,6 +81,8 @@ pub struct Shared {
     pub metrics: LearnerMetrics,
     /// When the learner started.
     pub started: Instant,
+    /// Updates applied, for the prefetcher's importance-sampling anneal.
+    pub steps: Arc<AtomicU64>,
 }
 
 /// What the training thread needs besides the shared state.
@@ -162,6 +165,10 @@ impl Learner {
             learner.resume()?;
         }
         learner.shared.status.lock().update_step = learner.trainer.step();
+        learner
+            .shared
+            .steps
+            .store(learner.trainer.step(), Ordering::Relaxed);
         learner.rate = (Instant::now(), learner.trainer.step());
         learner.publish()?;
         Ok(learner)
@@ -301,6 +308,7 @@ impl Learner {
             m.priority_updates_dropped.inc();
         }
 
+        self.shared.steps.store(stats.step, Ordering::Relaxed);
         m.updates.inc();
         m.loss.set(stats.loss);
         m.q_mean.set(stats.q_mean);
@@ -424,6 +432,9 @@ impl Learner {
             ));
         }
         self.trainer.restore(loaded.state)?;
+        self.shared
+            .steps
+            .store(self.trainer.step(), Ordering::Relaxed);
         self.version = self.version.max(loaded.manifest.weights_version);
         self.eval = (
             loaded.manifest.eval_weights_version,

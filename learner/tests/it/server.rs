@@ -157,11 +157,20 @@ async fn checkpoint_api_validates_ids_and_tokens_over_grpc() {
         .await
         .unwrap_err();
     assert_eq!(err.code(), Some(Code::InvalidArgument), "{err}");
-    open.report_evaluation(version, [("success_rate".to_owned(), 0.75)].into())
-        .await
-        .unwrap();
+    open.report_evaluation(
+        version,
+        [
+            ("success_rate".to_owned(), 0.75),
+            ("mean_return".to_owned(), -0.5),
+        ]
+        .into(),
+    )
+    .await
+    .unwrap();
     let second = open.save().await.unwrap();
     assert_eq!(second.eval_metrics.get("success_rate"), Some(&0.75));
+    // The best checkpoint is picked by learner.best_metric, mean_return by
+    // default (the rule train keeps its best/ weights by).
     assert!(second.best);
 
     open.delete(&saved.id).await.unwrap();

@@ -170,12 +170,21 @@ impl Chain {
 }
 
 fn trainer(spec: NetworkSpec, optimizer: OptimizerConfig, target: TargetUpdate) -> Trainer {
+    trainer_with_delta(spec, optimizer, target, 1.0)
+}
+
+fn trainer_with_delta(
+    spec: NetworkSpec,
+    optimizer: OptimizerConfig,
+    target: TargetUpdate,
+    huber_delta: f64,
+) -> Trainer {
     Trainer::new(TrainerConfig {
         spec,
         seed: 3,
         optimizer,
         max_grad_norm: 10.0,
-        huber_delta: 1.0,
+        huber_delta,
         target_update: target,
         target_period: 25,
         target_tau: 0.05,
@@ -291,4 +300,87 @@ fn divergence_is_an_error_and_the_update_is_not_applied() {
     let err = t.update(&batch).unwrap_err();
     assert!(err.to_string().contains("diverged"), "{err}");
     assert_eq!(t.step(), 0);
+}
+
+/// The return of waiting out the episode: -0.01 a step over the 300 steps
+/// of an occlusion episode, discounted by 0.99 a step.
+const TIMEOUT_RETURN: f32 = -0.951;
+
+/// Q(go) and Q(wait) learned on a one-state bandit of the simulator's kind:
+/// *go* collides (-10) with probability `p` and succeeds (+1) otherwise,
+/// *wait* times out; both end the episode. The batch holds the outcomes in
+/// their exact proportions (100 gos), so what the loss converges to is the
+/// estimator's fixed point, not sampling noise.
+fn bandit_q(p: f64, huber_delta: f64) -> (f32, f32) {
+    let spec = toy_spec(1, 2, vec![16]);
+    let mut b = toy_batch(&spec);
+    let s = b.push_observation(&[1.0]);
+    let collisions = (100.0 * p).round() as usize;
+    for i in 0..100 {
+        for (action, reward) in [
+            (0, if i < collisions { -10.0 } else { 1.0 }),
+            (1, TIMEOUT_RETURN),
+        ] {
+            b.push(Transition {
+                observation: s,
+                action,
+                reward,
+                discount: 0.0,
+                priority: 1.0,
+                next_observation: s,
+            });
+        }
+    }
+    let n = b.len();
+    let batch = TrainingBatch::from_batch(&b, &vec![1.0; n], (0..n as u64).collect(), &spec)
+        .expect("test setup");
+    let mut t = trainer_with_delta(
+        spec,
+        OptimizerConfig::Adam {
+            lr: 0.01,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+        TargetUpdate::Period,
+        huber_delta,
+    );
+    for _ in 0..2000 {
+        t.update(&batch).expect("update");
+    }
+    let state = Tensor::ones([1, 1], (Kind::Float, tch::Device::Cpu));
+    let q = values(&t.online().q_values(&state).expect("forward"));
+    (q[0], q[1])
+}
+
+#[test]
+fn the_default_loss_learns_the_mean_return_of_a_risky_go() {
+    let delta = crossroads_common::config::LearnerConfig::default().huber_delta;
+    // Break-even: 1 - 11 p = TIMEOUT_RETURN at p = 0.177.
+    for p in [0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.5] {
+        let (go, wait) = bandit_q(p, delta);
+        let want = 1.0 - 11.0 * p as f32;
+        let (go_1, _) = bandit_q(p, 1.0);
+        eprintln!(
+            "p {p:.2}: mean return of go {want:+.3}, learned Q(go) {go:+.3} (delta {delta}), {go_1:+.3} (delta 1); Q(wait) {wait:+.3}"
+        );
+        assert!(
+            (go - want).abs() < 0.05 && (wait - TIMEOUT_RETURN).abs() < 0.05,
+            "p = {p}: Q(go) {go}, Q(wait) {wait}; the mean returns are {want} and {TIMEOUT_RETURN}"
+        );
+        assert_eq!(
+            go > wait,
+            p < 0.177,
+            "p = {p}: Q(go) {go}, Q(wait) {wait}: the greedy choice must flip at p = 0.177"
+        );
+    }
+    // The mechanism the default avoids: with delta 1 a collision's error
+    // (~11) is in Huber's linear part and Q(go) settles near
+    // 1 - p / (1 - p), the loss's median-like fixed point, so going at 30 %
+    // risk (mean return -2.3) looks better than waiting.
+    let (go, wait) = bandit_q(0.3, 1.0);
+    assert!(
+        (go - (1.0 - 0.3 / 0.7)).abs() < 0.05 && go > wait,
+        "delta 1 at p = 0.3: Q(go) {go}, Q(wait) {wait}"
+    );
 }
