@@ -11,7 +11,7 @@ use crossroads_common::{ActorConfig, Shutdown, TransitionBatch, TransportConfig}
 use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
 
 use crate::error::ActorError;
-use crate::exploration::{EpsilonGreedy, Mode, epsilon_ladder};
+use crate::exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode};
 use crate::metrics::ActorMetrics;
 use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
 use crate::push::Pusher;
@@ -44,6 +44,10 @@ pub struct ActorSettings {
     pub seed: u64,
     /// Exploration or greedy evaluation.
     pub mode: Mode,
+    /// Explore an absorbing *go* once per episode (see [`EpsilonGreedy`]).
+    pub explore_go_once: bool,
+    /// Cut n-step windows before exploratory actions.
+    pub cut_at_exploration: bool,
 }
 
 impl ActorSettings {
@@ -63,8 +67,19 @@ impl ActorSettings {
         let mode = if config.eval {
             Mode::Greedy
         } else {
+            let rungs = if config.ladder_over_envs {
+                Ladder::new
+            } else {
+                Ladder::per_actor
+            };
             Mode::Explore {
-                epsilon: epsilon_ladder(index, count, config.epsilon_base, config.epsilon_alpha),
+                ladder: rungs(
+                    config.epsilon_base,
+                    config.epsilon_alpha,
+                    index,
+                    count,
+                    config.envs.max(1) as u32,
+                ),
             }
         };
         Ok(Self {
@@ -79,6 +94,8 @@ impl ActorSettings {
             count,
             seed: actor_seed(config.seed, index),
             mode,
+            explore_go_once: config.explore_go_once,
+            cut_at_exploration: config.cut_at_exploration,
         })
     }
 }
@@ -201,6 +218,7 @@ pub struct Actor {
     current: Vec<Option<ObsRef>>,
     q: Vec<f32>,
     actions: Vec<usize>,
+    episode_steps: Vec<u32>,
     emitted: Vec<NStepTransition>,
     builder: BatchBuilder,
     ready: VecDeque<TransitionBatch>,
@@ -232,12 +250,24 @@ impl Actor {
         let num_actions = envs.num_actions();
         let builder = BatchBuilder::new(envs.batch_spec(), num_actions as u32, encoding);
         metrics.epsilon.set(settings.mode.epsilon());
+        let mut explorer = EpsilonGreedy::new(settings.mode, m, settings.seed);
+        if let Some(action) = settings
+            .action_set
+            .absorbing_go()
+            .filter(|_| settings.explore_go_once)
+        {
+            explorer = explorer.with_absorbing_go(AbsorbingGo {
+                action,
+                step_limit: settings.scenario.spec().step_limit,
+            });
+        }
         let mut actor = Self {
-            explorer: EpsilonGreedy::new(settings.mode, m, settings.seed),
+            explorer,
             assemblers: vec![NStepAssembler::new(settings.n_step, settings.gamma); m],
             current: vec![None; m],
             q: vec![0.0; m * num_actions],
             actions: vec![0; m],
+            episode_steps: vec![0; m],
             emitted: Vec::new(),
             builder,
             ready: VecDeque::new(),
@@ -298,7 +328,20 @@ impl Actor {
                 }
             }
         }
-        self.explorer.choose(&self.q, a, &mut self.actions);
+        for (i, steps) in self.episode_steps.iter_mut().enumerate() {
+            *steps = self.envs.env(i).map_or(0, crossroads_sim::Env::steps);
+        }
+        self.explorer
+            .choose(&self.q, a, &self.episode_steps, &mut self.actions);
+        if training && self.settings.cut_at_exploration {
+            // n-step returns follow the greedy policy: a window ends
+            // (bootstrapping) before an exploratory action.
+            for i in 0..m {
+                if !self.explorer.was_greedy(i) {
+                    self.assemblers[i].cut(&mut self.emitted);
+                }
+            }
+        }
         let results = self.envs.step(&self.actions)?.to_vec();
 
         let mut summary = StepSummary {

@@ -1,5 +1,6 @@
-//! Exploration: the Ape-X epsilon ladder and epsilon-greedy choices with a
-//! seeded random stream per environment.
+//! Exploration: the Ape-X epsilon ladder over every environment of every
+//! actor, and epsilon-greedy choices with a seeded random stream per
+//! environment that keep an absorbing *go* from ending exploration early.
 
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -18,24 +19,106 @@ pub fn epsilon_ladder(index: u32, count: u32, base: f64, alpha: f64) -> f64 {
     base.powf(1.0 + alpha * i / f64::from(count - 1))
 }
 
+/// An actor's rungs of the Ape-X ladder. Ape-X's N is the number of acting
+/// copies, so the ladder runs over every environment of every actor:
+/// environment `e` of actor `index` (of `count`, `envs` each) is rung
+/// `index * envs + e` of `count * envs`. With 2 actors of 16 environments
+/// the 32 epsilons run from 0.4 to 0.4^8; a ladder over the 2 processes
+/// alone gave 0.4 and 0.00066 and nothing between.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ladder {
+    /// Epsilon of rung 0.
+    pub base: f64,
+    /// Ape-X's exponent (7).
+    pub alpha: f64,
+    /// This actor's first rung.
+    pub first: u32,
+    /// Its environments (rungs).
+    pub envs: u32,
+    /// Rungs over the whole run.
+    pub rungs: u32,
+    /// Whether each environment has its own rung (Ape-X); otherwise every
+    /// environment of the actor stands on rung `first` of `rungs`.
+    pub per_env: bool,
+}
+
+impl Ladder {
+    /// The rungs of actor `index` of `count`, with `envs` environments each.
+    pub fn new(base: f64, alpha: f64, index: u32, count: u32, envs: u32) -> Self {
+        let envs = envs.max(1);
+        Self {
+            base,
+            alpha,
+            first: index.saturating_mul(envs),
+            envs,
+            rungs: count.max(1).saturating_mul(envs),
+            per_env: true,
+        }
+    }
+
+    /// The earlier ladder over actor processes: every environment of actor
+    /// `index` explores with rung `index` of `count` (kept to compare).
+    pub fn per_actor(base: f64, alpha: f64, index: u32, count: u32, envs: u32) -> Self {
+        Self {
+            base,
+            alpha,
+            first: index,
+            envs: envs.max(1),
+            rungs: count.max(1),
+            per_env: false,
+        }
+    }
+
+    /// The same `epsilon` in every environment.
+    pub fn constant(epsilon: f64, envs: u32) -> Self {
+        Self::new(epsilon, 0.0, 0, 1, envs)
+    }
+
+    /// Epsilon of this actor's environment `env`.
+    pub fn epsilon(&self, env: usize) -> f64 {
+        let rung = if self.per_env {
+            self.first.saturating_add(env as u32)
+        } else {
+            self.first
+        };
+        epsilon_ladder(rung, self.rungs, self.base, self.alpha)
+    }
+
+    /// Mean epsilon over this actor's environments.
+    pub fn mean(&self) -> f64 {
+        (0..self.envs as usize)
+            .map(|e| self.epsilon(e))
+            .sum::<f64>()
+            / f64::from(self.envs)
+    }
+}
+
 /// How actions are chosen from Q-values.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Mode {
-    /// Training: a uniformly random action with probability `epsilon`, the
-    /// greedy one otherwise; transitions are assembled and pushed.
+    /// Training: each environment explores with its rung's epsilon;
+    /// transitions are assembled and pushed.
     Explore {
-        /// Probability of a random action, in [0, 1].
-        epsilon: f64,
+        /// The environments' epsilons.
+        ladder: Ladder,
     },
     /// Evaluation: always greedy; no transitions.
     Greedy,
 }
 
 impl Mode {
-    /// The epsilon in effect (0 when greedy).
+    /// Mean epsilon over the environments (0 when greedy).
     pub fn epsilon(self) -> f64 {
         match self {
-            Mode::Explore { epsilon } => epsilon,
+            Mode::Explore { ladder } => ladder.mean(),
+            Mode::Greedy => 0.0,
+        }
+    }
+
+    /// Epsilon of environment `env` (0 when greedy).
+    pub fn epsilon_of(self, env: usize) -> f64 {
+        match self {
+            Mode::Explore { ladder } => ladder.epsilon(env),
             Mode::Greedy => 0.0,
         }
     }
@@ -46,22 +129,56 @@ impl Mode {
     }
 }
 
+/// An action set whose *go* ends the episode (TTG, Creep): the index of
+/// *go* and the episode's step limit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AbsorbingGo {
+    /// The index of *go*.
+    pub action: usize,
+    /// Simulation steps of an episode at most.
+    pub step_limit: u32,
+}
+
 /// Epsilon-greedy choices for M environments, each with its own random
 /// stream, so choices depend on the seed and the environment's index only.
+///
+/// Where *go* is absorbing, a uniformly random action ends most exploring
+/// episodes within a few decisions (Creep at epsilon 0.4: *go* on 13 % of
+/// decisions, so few episodes creep to the limit or live to see a gap open
+/// late). There, a random action is drawn among the others, and *go* is
+/// explored once per episode at most: with the environment's epsilon an
+/// episode gets a *go* due at a step drawn uniformly over the step limit,
+/// so exploring gos fall evenly over every phase of an episode (before the
+/// stop line, at the creep limit, late).
 #[derive(Debug, Clone)]
 pub struct EpsilonGreedy {
     mode: Mode,
     rngs: Vec<Xoshiro256PlusPlus>,
+    go: Option<AbsorbingGo>,
+    go_at: Vec<Option<u32>>,
+    greedy: Vec<bool>,
 }
 
 impl EpsilonGreedy {
     /// Streams for `envs` environments; stream `i` is seeded from
-    /// `seed` and `i`.
+    /// `seed` and `i`. Random actions are uniform over all actions.
     pub fn new(mode: Mode, envs: usize, seed: u64) -> Self {
         let rngs = (0..envs as u64)
             .map(|i| Xoshiro256PlusPlus::seed_from_u64(crossroads_sim::policy_seed(seed, i)))
             .collect();
-        Self { mode, rngs }
+        Self {
+            mode,
+            rngs,
+            go: None,
+            go_at: vec![None; envs],
+            greedy: vec![true; envs],
+        }
+    }
+
+    /// Explores an absorbing *go* once per episode at most (see the type).
+    pub fn with_absorbing_go(mut self, go: AbsorbingGo) -> Self {
+        self.go = Some(go);
+        self
     }
 
     /// The mode.
@@ -69,21 +186,48 @@ impl EpsilonGreedy {
         self.mode
     }
 
+    /// Whether environment `env`'s last action was the greedy one.
+    pub fn was_greedy(&self, env: usize) -> bool {
+        self.greedy.get(env).copied().unwrap_or(true)
+    }
+
     /// Writes one action per environment from its row of `q` (`envs x
-    /// num_actions`).
-    pub fn choose(&mut self, q: &[f32], num_actions: usize, actions: &mut [usize]) {
-        let epsilon = self.mode.epsilon();
-        for ((rng, row), action) in self
-            .rngs
-            .iter_mut()
-            .zip(q.chunks_exact(num_actions))
-            .zip(actions.iter_mut())
-        {
-            *action = if epsilon > 0.0 && rng.random_bool(epsilon.clamp(0.0, 1.0)) {
-                rng.random_range(0..num_actions)
-            } else {
-                argmax(row)
+    /// num_actions`); `steps` holds the simulation steps each environment's
+    /// episode has taken (0 at its first decision).
+    pub fn choose(&mut self, q: &[f32], num_actions: usize, steps: &[u32], actions: &mut [usize]) {
+        for (i, row) in q.chunks_exact(num_actions).enumerate().take(actions.len()) {
+            let epsilon = self.mode.epsilon_of(i).clamp(0.0, 1.0);
+            let best = argmax(row);
+            let rng = &mut self.rngs[i];
+            let step = steps.get(i).copied().unwrap_or(0);
+            let action = match self.go {
+                _ if epsilon <= 0.0 => best,
+                None => {
+                    if rng.random_bool(epsilon) {
+                        rng.random_range(0..num_actions)
+                    } else {
+                        best
+                    }
+                }
+                Some(go) => {
+                    if step == 0 {
+                        self.go_at[i] = rng
+                            .random_bool(epsilon)
+                            .then(|| rng.random_range(0..go.step_limit.max(1)));
+                    }
+                    if self.go_at[i].is_some_and(|at| step >= at) {
+                        self.go_at[i] = None;
+                        go.action
+                    } else if num_actions > 1 && rng.random_bool(epsilon) {
+                        let other = rng.random_range(0..num_actions - 1);
+                        if other >= go.action { other + 1 } else { other }
+                    } else {
+                        best
+                    }
+                }
             };
+            self.greedy[i] = action == best;
+            actions[i] = action;
         }
     }
 }
@@ -106,18 +250,79 @@ mod tests {
     }
 
     #[test]
+    fn the_ladder_runs_over_every_environment_of_every_actor() {
+        // 2 actors x 16 environments: 32 rungs from 0.4 to 0.4^8, actor 1
+        // continuing where actor 0 stops.
+        let a = Ladder::new(0.4, 7.0, 0, 2, 16);
+        let b = Ladder::new(0.4, 7.0, 1, 2, 16);
+        let all: Vec<f64> = (0..16)
+            .map(|e| a.epsilon(e))
+            .chain((0..16).map(|e| b.epsilon(e)))
+            .collect();
+        for (g, eps) in all.iter().enumerate() {
+            let want = 0.4f64.powf(1.0 + 7.0 * g as f64 / 31.0);
+            assert!((eps - want).abs() < 1e-12, "rung {g}: {eps} vs {want}");
+        }
+        assert!((all[0] - 0.4).abs() < 1e-12);
+        assert!((all[31] - 0.4f64.powi(8)).abs() < 1e-15);
+        // Between the two processes' extremes lie 30 others; the old
+        // per-process ladder had none.
+        assert_eq!(all.iter().filter(|&&e| e < 0.39 && e > 0.0007).count(), 30);
+        assert!(a.mean() > b.mean());
+        assert!((Ladder::constant(0.3, 4).mean() - 0.3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_absorbing_go_is_explored_once_per_episode_at_a_uniform_step() {
+        // Greedy is action 1 (wait); go is action 0. At epsilon 1 every
+        // episode gets one exploring go, due at a step uniform over 0..100,
+        // and other random actions never go.
+        let q = [0.0f32, 1.0, 0.0];
+        let go = AbsorbingGo {
+            action: 0,
+            step_limit: 100,
+        };
+        let mode = Mode::Explore {
+            ladder: Ladder::constant(1.0, 1),
+        };
+        let mut e = EpsilonGreedy::new(mode, 1, 3).with_absorbing_go(go);
+        let mut go_steps = Vec::new();
+        for _ in 0..2000 {
+            for step in 0..100 {
+                let mut a = [9];
+                e.choose(&q, 3, &[step], &mut a);
+                if a[0] == 0 {
+                    assert!(!e.was_greedy(0));
+                    go_steps.push(step);
+                    break;
+                }
+            }
+        }
+        assert_eq!(go_steps.len(), 2000, "one go per episode");
+        let early = go_steps.iter().filter(|&&s| s < 50).count();
+        assert!(
+            (900..1100).contains(&early),
+            "{early} of 2000 before step 50"
+        );
+    }
+
+    #[test]
     fn greedy_picks_the_argmax_and_epsilon_one_is_uniform() {
         let q = [0.0, 2.0, 1.0, 5.0, -1.0, 0.0];
         let mut actions = [9; 2];
-        EpsilonGreedy::new(Mode::Greedy, 2, 1).choose(&q, 3, &mut actions);
+        EpsilonGreedy::new(Mode::Greedy, 2, 1).choose(&q, 3, &[0, 0], &mut actions);
         assert_eq!(actions, [1, 0]);
 
-        let mut e = EpsilonGreedy::new(Mode::Explore { epsilon: 1.0 }, 1, 7);
+        let explore = |eps| Mode::Explore {
+            ladder: Ladder::constant(eps, 1),
+        };
+        let mut e = EpsilonGreedy::new(explore(1.0), 1, 7);
         let mut counts = [0; 3];
         for _ in 0..3000 {
             let mut a = [0];
-            e.choose(&q[..3], 3, &mut a);
+            e.choose(&q[..3], 3, &[5], &mut a);
             counts[a[0]] += 1;
+            assert_eq!(e.was_greedy(0), a[0] == 1);
         }
         assert!(
             counts.iter().all(|&c| (800..1200).contains(&c)),
@@ -129,11 +334,14 @@ mod tests {
     fn choices_are_reproducible_by_seed() {
         let q = vec![0.5f32; 4 * 5];
         let run = |seed| {
-            let mut e = EpsilonGreedy::new(Mode::Explore { epsilon: 0.5 }, 4, seed);
+            let mode = Mode::Explore {
+                ladder: Ladder::constant(0.5, 4),
+            };
+            let mut e = EpsilonGreedy::new(mode, 4, seed);
             let mut out = Vec::new();
             for _ in 0..20 {
                 let mut a = [0; 4];
-                e.choose(&q, 5, &mut a);
+                e.choose(&q, 5, &[1; 4], &mut a);
                 out.extend(a);
             }
             out

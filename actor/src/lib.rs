@@ -6,10 +6,11 @@
 //! per environment an [`NStepAssembler`]. Each [`Actor::step`] makes one
 //! batched call of an [`ActionValues`] (the Q-network, supplied by the
 //! caller so it can swap weights between steps), chooses actions with
-//! [`EpsilonGreedy`] (epsilon from the Ape-X ladder, [`epsilon_ladder`], or
-//! greedy in evaluation [`Mode`]), steps the environments and assembles
-//! n-step transitions over k-step actions with initial priorities from its
-//! own Q estimates; a [`BatchBuilder`] packs them into
+//! [`EpsilonGreedy`] (epsilon per environment from the Ape-X [`Ladder`] over
+//! every environment of every actor, an absorbing *go* explored once per
+//! episode, or greedy in evaluation [`Mode`]), steps the environments and
+//! assembles n-step transitions over k-step actions (windows cut before an
+//! exploratory action) with initial priorities from its own Q estimates; a [`BatchBuilder`] packs them into
 //! [`TransitionBatch`](crossroads_common::TransitionBatch)es.
 //! [`Actor::run`] is the acting loop. A [`Pusher`] delivers batches over
 //! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`] (oldest
@@ -39,7 +40,7 @@ pub use actor::{
 };
 pub use buffer::PushBuffer;
 pub use error::ActorError;
-pub use exploration::{EpsilonGreedy, Mode, epsilon_ladder};
+pub use exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode, epsilon_ladder};
 pub use metrics::ActorMetrics;
 pub use nstep::{
     BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,

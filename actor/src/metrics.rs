@@ -16,7 +16,7 @@
 //! | `crossroads_actor_weights_version` | gauge | | version of the weights in use |
 //! | `crossroads_actor_weights_staleness_seconds` | gauge | | age of the weights in use |
 //! | `crossroads_actor_backpressure_seconds_total` | counter | | time the acting loop waited for a live replay that was behind (its rate limiter) |
-//! | `crossroads_actor_epsilon` | gauge | | exploration epsilon (0 when greedy) |
+//! | `crossroads_actor_epsilon` | gauge | | mean exploration epsilon over the environments (0 when greedy) |
 
 use prometheus::{
     Counter, Gauge, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, Opts,
@@ -131,7 +131,7 @@ impl ActorMetrics {
         )?;
         let epsilon = Gauge::new(
             "crossroads_actor_epsilon",
-            "Exploration epsilon (0 when greedy)",
+            "Mean exploration epsilon over the environments (0 when greedy)",
         )?;
         let backpressure_seconds = Counter::new(
             "crossroads_actor_backpressure_seconds_total",

@@ -140,6 +140,21 @@ impl NStepAssembler {
         }
     }
 
+    /// The action about to be recorded is not the greedy one: every
+    /// decision in the window is emitted now, bootstrapped from the current
+    /// observation, so no n-step return sums over an exploratory action
+    /// (which would pull Q of the greedy actions before it towards the
+    /// random action's outcome, a random *go* most of all). The
+    /// exploratory decision itself starts the next window.
+    pub fn cut(&mut self, out: &mut Vec<NStepTransition>) {
+        let Some((observation, max_q)) = self.current.clone() else {
+            return;
+        };
+        while !self.window.is_empty() {
+            out.push(self.emit_front(Arc::clone(&observation), Some(max_q)));
+        }
+    }
+
     /// Forgets the window (an episode abandoned without an end).
     pub fn clear(&mut self) {
         self.window.clear();

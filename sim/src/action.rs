@@ -61,6 +61,16 @@ impl ActionSet {
         }
     }
 
+    /// The index of a *go* that ends the episode (TTG, Creep); `None` where
+    /// going is a sequence of accelerations (Sequential).
+    pub fn absorbing_go(self) -> Option<usize> {
+        match self {
+            Self::Ttg => Some(0),
+            Self::Creep => Some(2),
+            Self::Sequential => None,
+        }
+    }
+
     /// Lower-case name, as parsed.
     pub fn name(self) -> &'static str {
         match self {

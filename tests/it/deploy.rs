@@ -617,14 +617,18 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
         .filter_map(|a| sample(&scrape(&rt, a), "crossroads_actor_epsilon"))
         .collect();
     epsilons.sort_by(f64::total_cmp);
-    let ladder = [0.4_f64.powi(8), 0.4];
+    // The ladder runs over 2 actors x 4 environments; the gauge is the
+    // mean of an actor's 4 rungs (actor 1 holds rungs 4..8).
+    let rung = |g: i32| 0.4_f64.powf(1.0 + 7.0 * f64::from(g) / 7.0);
+    let mean = |first: i32| (first..first + 4).map(rung).sum::<f64>() / 4.0;
+    let ladder = [mean(4), mean(0)];
     assert!(
         epsilons.len() == 2
             && epsilons
                 .iter()
                 .zip(ladder)
                 .all(|(e, l)| (e - l).abs() < 1e-9),
-        "the two actors take indices 0 and 1 of the ladder: {epsilons:?}"
+        "the two actors take indices 0 and 1 of the ladder ({ladder:?}): {epsilons:?}"
     );
     eprintln!(
         "deploy: replay {first_size} -> {later_size} items, learner {first_updates} -> \

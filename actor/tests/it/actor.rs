@@ -26,10 +26,16 @@ fn training_fills_valid_batches_with_one_forward_pass_per_step() {
         out.iter().flat_map(|b| &b.discounts).any(|d| *d == 0.0),
         "episode ends are terminal"
     );
+    // A single actor's 4 environments are the 4 rungs of the ladder; the
+    // gauge is their mean.
     let eps = a.metrics().epsilon.get();
+    let mean = (0..4)
+        .map(|e| 0.4f64.powf(1.0 + 7.0 * f64::from(e) / 3.0))
+        .sum::<f64>()
+        / 4.0;
     assert!(
-        (eps - 0.4).abs() < 1e-12,
-        "a single actor explores with 0.4"
+        (eps - mean).abs() < 1e-12,
+        "a single actor of 4 environments explores with a mean {mean}, got {eps}"
     );
     let forward = values.calls;
     let decisions: u64 = forward as u64 * 4;
@@ -81,18 +87,24 @@ fn the_ladder_comes_from_index_and_count() {
         count: 8,
         ..ActorConfig::default()
     };
-    let eps = |c: &ActorConfig, i| {
+    // Rungs over actors x envs: environment e of actor i is rung
+    // i * envs + e of count * envs.
+    let eps = |c: &ActorConfig, i, e| {
         ActorSettings::from_config(c, i)
             .expect("settings")
             .mode
-            .epsilon()
+            .epsilon_of(e)
     };
-    assert!((eps(&config, 0) - 0.4).abs() < 1e-12);
-    assert!((eps(&config, 1) - 0.16).abs() < 1e-12);
-    assert!((eps(&config, 7) - 0.4f64.powi(8)).abs() < 1e-15);
+    let rungs = f64::from(8 * config.envs as u32 - 1);
+    let ladder = |g: f64| 0.4f64.powf(1.0 + 7.0 * g / rungs);
+    assert!((eps(&config, 0, 0) - 0.4).abs() < 1e-12);
+    assert!((eps(&config, 1, 0) - ladder(config.envs as f64)).abs() < 1e-12);
+    assert!((eps(&config, 1, 3) - ladder(config.envs as f64 + 3.0)).abs() < 1e-12);
+    assert!((eps(&config, 7, config.envs - 1) - 0.4f64.powi(8)).abs() < 1e-15);
     assert!(ActorSettings::from_config(&config, 8).is_err());
     config.count = 1;
-    assert_eq!(eps(&config, 0), 0.4);
+    config.envs = 1;
+    assert_eq!(eps(&config, 0, 0), 0.4);
     let a = ActorSettings::from_config(
         &ActorConfig {
             count: 8,
@@ -224,4 +236,73 @@ fn the_q_network_drives_actors_of_every_kind() {
         assert_eq!(b.num_actions as i64, net.spec().num_actions);
         assert!(b.priorities.iter().all(|p| p.is_finite()), "{kind}");
     }
+}
+
+/// The share of exploring Creep episodes (epsilon 0.4) on occluded that
+/// creep to the creep limit before they end, under a greedy choice of
+/// `greedy` (a Q row) and uniform or absorbing-go exploration.
+fn creep_limit_share(greedy: [f32; 3], absorbing: bool) -> f64 {
+    use crossroads_actor::{AbsorbingGo, EpsilonGreedy, Ladder};
+    use crossroads_sim::{ActionSet, Env, EnvConfig, Scenario};
+    let scenario = std::sync::Arc::new(Scenario::load("occluded").expect("built-in scenario"));
+    let limit = scenario.spec().ego.creep_limit_s;
+    let step_limit = scenario.spec().step_limit;
+    let mut env = Env::new(
+        std::sync::Arc::clone(&scenario),
+        EnvConfig::for_actions(ActionSet::Creep),
+    );
+    let mode = Mode::Explore {
+        ladder: Ladder::constant(0.4, 1),
+    };
+    let mut explorer = EpsilonGreedy::new(mode, 1, 11);
+    if absorbing {
+        explorer = explorer.with_absorbing_go(AbsorbingGo {
+            action: 2,
+            step_limit,
+        });
+    }
+    let episodes = 200;
+    let mut reached = 0;
+    for seed in 0..episodes {
+        env.reset(seed);
+        let mut at_limit = false;
+        while !env.is_done() {
+            let mut a = [0];
+            explorer.choose(&greedy, 3, &[env.steps()], &mut a);
+            env.step(a[0]).expect("valid action");
+            at_limit |= env.ego().s >= limit - 0.05 && !env.ego().committed;
+        }
+        reached += usize::from(at_limit);
+    }
+    reached as f64 / episodes as f64
+}
+
+#[test]
+fn exploring_creep_episodes_reach_the_creep_limit() {
+    // Uniform exploration: a random go (13 % of decisions) ends most
+    // episodes before the ego has crept the 2.5 m to the limit, whether the
+    // greedy choice is to wait or to creep.
+    let wait = [1.0, 0.0, 0.0];
+    let creep = [0.0, 1.0, 0.0];
+    let uniform = (
+        creep_limit_share(wait, false),
+        creep_limit_share(creep, false),
+    );
+    assert!(
+        uniform.0 < 0.05 && uniform.1 < 0.4,
+        "uniform exploration reaches the limit in {uniform:?} of episodes"
+    );
+    // Go explored once per episode at a uniform step: most episodes get
+    // there (and then wait at the limit, where the gaps are judged).
+    let once = (
+        creep_limit_share(wait, true),
+        creep_limit_share(creep, true),
+    );
+    eprintln!(
+        "share of exploring episodes at the creep limit (greedy wait, greedy creep): uniform {uniform:?}, go once {once:?}"
+    );
+    assert!(
+        once.0 > 0.7 && once.1 > 0.8,
+        "absorbing-go exploration reaches the limit in {once:?} of episodes"
+    );
 }

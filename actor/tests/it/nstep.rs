@@ -104,6 +104,48 @@ fn an_episode_shorter_than_the_window_is_flushed() {
 }
 
 #[test]
+fn a_window_is_cut_before_an_exploratory_action() {
+    let g = 0.5f64;
+    let mut nstep = NStepAssembler::new(3, g);
+    let mut out = Vec::new();
+    // d0, d1 greedy (1 and 2 steps); d2 exploratory from o2 (max Q 6).
+    nstep.begin(obs(0), &[0.0, 1.0], &mut out);
+    nstep.record(1, 1.0, 1.0, 1, None, &mut out);
+    nstep.begin(obs(1), &[3.0, 0.0], &mut out);
+    nstep.record(0, 3.0, 2.0, 2, None, &mut out);
+    nstep.begin(obs(2), &[6.0, -1.0], &mut out);
+    assert!(out.is_empty());
+    nstep.cut(&mut out);
+    // d0: 1 + 0.5 * 2 over 3 steps, then 0.5^3 * 6 from o2;
+    // d1: 2 over 2 steps, then 0.5^2 * 6 from o2.
+    assert_eq!(out.len(), 2);
+    let want = [(0, 2.0, g.powi(3), 1.0), (1, 2.0, g.powi(2), 3.0)];
+    for (t, (state, ret, discount, q)) in out.iter().zip(want) {
+        assert_eq!((t.observation.id, t.next_observation.id), (state, 2));
+        assert!(close(t.reward, ret), "{} vs {ret}", t.reward);
+        assert!(close(t.discount, discount), "{} vs {discount}", t.discount);
+        assert!(close(t.priority, (ret + discount * 6.0 - q).abs()));
+    }
+    assert_eq!(nstep.pending(), 0);
+    // The exploratory action (reward -4, 1 step) starts the next window:
+    // its own return runs on over the greedy decision after it.
+    out.clear();
+    nstep.record(1, -1.0, -4.0, 1, None, &mut out);
+    nstep.begin(obs(3), &[0.0, 0.0], &mut out);
+    nstep.record(0, 0.0, 8.0, 1, Some(obs(9)), &mut out);
+    assert_eq!(out.len(), 2);
+    assert_eq!((out[0].observation.id, out[0].action), (2, 1));
+    assert!(close(out[0].reward, -4.0 + g * 8.0));
+    assert_eq!(out[0].discount, 0.0);
+    assert!(close(out[1].reward, 8.0));
+    // A cut with an empty window emits nothing.
+    out.clear();
+    nstep.begin(obs(10), &[0.0, 0.0], &mut out);
+    nstep.cut(&mut out);
+    assert!(out.is_empty());
+}
+
+#[test]
 fn one_step_windows_bootstrap_with_gamma_to_the_k() {
     let g = 0.5;
     let mut nstep = NStepAssembler::new(1, g);

@@ -61,6 +61,21 @@ pub struct ActorConfig {
     pub epsilon_base: f64,
     /// Ape-X ladder exponent (7). At least 0.
     pub epsilon_alpha: f64,
+    /// Whether the ladder's N counts every environment of every actor
+    /// (Ape-X's acting copies: environment e of actor i is rung
+    /// i * envs + e of count * envs) rather than actor processes (every
+    /// environment of actor i on rung i of count; with 2 actors, 0.4 and
+    /// 0.00066 and nothing between).
+    pub ladder_over_envs: bool,
+    /// Where *go* ends the episode (TTG, Creep): random actions exclude
+    /// it and it is explored once per episode at most, at a step drawn
+    /// uniformly over the step limit. Off: uniformly random actions, which
+    /// end most exploring episodes within a few decisions.
+    pub explore_go_once: bool,
+    /// Whether an n-step window is cut (bootstrapped) before an exploratory
+    /// action, so that returns follow the greedy policy. Off: returns sum
+    /// over whatever was taken.
+    pub cut_at_exploration: bool,
     /// Greedy evaluation: no exploration, no transitions pushed; episodes
     /// are reported to the metrics (and the log: each at debug level,
     /// outcome rates every 30 s at info).
@@ -94,6 +109,9 @@ impl Default for ActorConfig {
             seed: 1,
             epsilon_base: 0.4,
             epsilon_alpha: 7.0,
+            ladder_over_envs: true,
+            explore_go_once: true,
+            cut_at_exploration: true,
             eval: false,
             transport: ActorTransport::Grpc,
             weights: None,
