@@ -65,6 +65,9 @@ pub struct TrialResult {
     pub brake_light_s: f64,
     /// Seconds before the ego chose *go*; `None` if it never did.
     pub wait_s: Option<f64>,
+    /// Undiscounted return under the scenario's rewards
+    /// ([`crate::Rewards::episode_return`]).
+    pub episode_return: f64,
 }
 
 /// What [`evaluate`] measured. Rates are fractions in `[0, 1]`; intervals
@@ -111,6 +114,12 @@ pub struct EvalReport {
     pub mean_wait_s: Option<f64>,
     /// Its interval.
     pub mean_wait_ci: Option<Interval>,
+    /// Mean undiscounted return per trial under the scenario's rewards
+    /// (+1 success, -10 collision, -0.01 a step by default): the task's
+    /// objective, by which training keeps its best weights.
+    pub mean_return: f64,
+    /// Its interval.
+    pub mean_return_ci: Interval,
 }
 
 /// Runs `config.trials` trials of `policy` on `scenario` on the rayon pool
@@ -215,6 +224,7 @@ fn run_chunk(
                     brake_s: m.brake_time_s,
                     brake_light_s: m.brake_light_s,
                     wait_s: m.wait_s,
+                    episode_return: scenario.spec().rewards.episode_return(outcome, m.steps),
                 });
             }
             progress(1);
@@ -261,6 +271,8 @@ pub fn summarize(
     let brakes: Vec<f64> = results.iter().map(|r| r.brake_s).collect();
     let lights: Vec<f64> = results.iter().map(|r| r.brake_light_s).collect();
     let waits: Vec<f64> = results.iter().filter_map(|r| r.wait_s).collect();
+    let returns: Vec<f64> = results.iter().map(|r| r.episode_return).collect();
+    let ret = mean_ci(&returns);
     let time = mean_ci(&times);
     let brake = mean_ci(&brakes);
     let light = mean_ci(&lights);
@@ -289,6 +301,8 @@ pub fn summarize(
         mean_brake_light_ci: light.map_or(zero, |b| b.1),
         mean_wait_s: wait.map(|w| w.0),
         mean_wait_ci: wait.map(|w| w.1),
+        mean_return: ret.map_or(0.0, |r| r.0),
+        mean_return_ci: ret.map_or(zero, |r| r.1),
     }
 }
 

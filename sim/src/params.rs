@@ -173,6 +173,20 @@ pub struct Rewards {
     pub step: f64,
 }
 
+impl Rewards {
+    /// The undiscounted return of an episode that ended `outcome` after
+    /// `steps` steps: the step reward on every step, plus the success or
+    /// collision reward (a timeout earns the step rewards alone).
+    pub fn episode_return(&self, outcome: crate::Outcome, steps: u32) -> f64 {
+        let end = match outcome {
+            crate::Outcome::Success => self.success,
+            crate::Outcome::Collision => self.collision,
+            crate::Outcome::Timeout => 0.0,
+        };
+        self.step * f64::from(steps) + end
+    }
+}
+
 impl Default for Rewards {
     fn default() -> Self {
         Self {

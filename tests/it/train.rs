@@ -31,6 +31,8 @@ fn train(out: &Path, updates: &str, extra: &[&str]) -> Output {
         "train.eval_every=200",
         "--set",
         "train.eval_trials=200",
+        "--set",
+        "train.confirm_trials=1000",
         "train",
         "--scenario",
         "right",
@@ -60,18 +62,18 @@ fn training_across_real_processes_beats_the_untrained_network() {
     assert!(rows.len() >= 3, "{rows:?}");
     let untrained = &rows[0];
     assert_eq!(untrained.updates, 0, "the first evaluation is of the start");
-    // An untrained network either waits for ever (0 % success, no
-    // collisions) or goes at once (on Right about 90 % success with 10 %
-    // collisions), depending on its initialization; the score that picks
-    // the best weights (success minus ten times collisions) is low either
-    // way, so training must lift it.
+    // An untrained network either waits for ever (0 % success, a whole
+    // episode of step rewards) or goes at once (on Right about 90 %
+    // success with 10 % collisions), depending on its initialization; the
+    // score that picks the best weights (the mean undiscounted return) is
+    // low either way, so training must lift it.
     let best = rows
         .iter()
         .map(|r| r.score())
         .fold(f64::NEG_INFINITY, f64::max);
     assert!(
         best >= untrained.score() + 0.25 && best >= 0.5,
-        "the greedy score (success - 10 x collisions) went from {:.3} untrained to at best {best:.3}: {rows:?}",
+        "the greedy mean return went from {:.3} untrained to at best {best:.3}: {rows:?}",
         untrained.score()
     );
 
@@ -83,6 +85,8 @@ fn training_across_real_processes_beats_the_untrained_network() {
         "config.toml",
         "curve.png",
         "best/weights.safetensors",
+        "best/evaluation.json",
+        "last/weights.safetensors",
         "logs/replay.log",
         "logs/learner.log",
         "logs/actor-0.log",
@@ -111,9 +115,15 @@ fn training_across_real_processes_beats_the_untrained_network() {
     let e: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     // Judged by the same score as above: success alone can be lower than
     // an untrained network that goes at once and collides 10 % of the time.
-    let score = e["success_rate"].as_f64().expect("rate")
-        - 10.0 * e["collision_rate"].as_f64().expect("rate");
+    let score = e["mean_return"].as_f64().expect("mean return");
     assert!(score > untrained.score(), "{e} against {untrained:?}");
+    // best/ holds the re-measured evaluation (train.confirm_trials), not
+    // the periodic one.
+    let kept: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(best_dir.join("evaluation.json")).expect("best evaluation"),
+    )
+    .expect("json");
+    assert_eq!(kept["trials"], 1000, "{kept}");
     assert!(
         e["policy"]
             .as_str()

@@ -19,8 +19,14 @@ pub struct TrainConfig {
     /// Learner updates between greedy evaluations. At least 1.
     pub eval_every: u64,
     /// Trials per periodic evaluation (the same seeded trials each time).
-    /// At least 1.
+    /// Keep it small (1,000 takes seconds): evaluations share the cores
+    /// with training, and `confirm_trials` and `reproduce` measure the
+    /// 10,000-trial figures. At least 1.
     pub eval_trials: u64,
+    /// Largest share of wall time the evaluations may take: the next one
+    /// waits (past `eval_every`) until the last one's duration is at most
+    /// this share of the time since it began. In (0, 1].
+    pub eval_share: f64,
     /// Seed of the evaluation trials (kept apart from the actors' seeds).
     pub eval_seed: u64,
     /// Trials that confirm a periodic evaluation that met the target (the
@@ -49,6 +55,7 @@ impl Default for TrainConfig {
             transport: ActorTransport::Shm,
             eval_every: 2_000,
             eval_trials: 1_000,
+            eval_share: 0.2,
             eval_seed: 20_180_521,
             confirm_trials: 10_000,
             target_success: 0.0,
@@ -91,6 +98,11 @@ impl TrainConfig {
                 format!("must be a fraction in [0, 1], got {v}"),
             );
         }
+        check(
+            self.eval_share > 0.0 && self.eval_share <= 1.0,
+            "eval_share",
+            format!("must be in (0, 1], got {}", self.eval_share),
+        );
         for (key, v) in [
             ("target_time_s", self.target_time_s),
             ("max_minutes", self.max_minutes),

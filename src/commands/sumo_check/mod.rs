@@ -145,18 +145,22 @@ pub fn run(args: &SumoCheckArgs) -> anyhow::Result<ExitCode> {
                 mine.len(),
                 plan.scenario
             );
-            let results: Vec<TrialResult> = mine
-                .iter()
-                .map(|r| TrialResult {
-                    outcome: r.outcome,
-                    time_s: r.time_s,
-                    // SUMO has no intended deceleration to read; its brake
-                    // light is the one braking measure both have.
-                    brake_s: r.brake_s,
-                    brake_light_s: r.brake_s,
-                    wait_s: r.wait_s,
-                })
-                .collect();
+            let results: Vec<TrialResult> =
+                mine.iter()
+                    .map(|r| TrialResult {
+                        outcome: r.outcome,
+                        time_s: r.time_s,
+                        // SUMO has no intended deceleration to read; its brake
+                        // light is the one braking measure both have.
+                        brake_s: r.brake_s,
+                        brake_light_s: r.brake_s,
+                        wait_s: r.wait_s,
+                        episode_return: plan.compiled.spec().rewards.episode_return(
+                            r.outcome,
+                            (r.time_s / plan.compiled.dt()).round() as u32,
+                        ),
+                    })
+                    .collect();
             let disagreements = mine
                 .iter()
                 .filter(|r| (r.outcome == Outcome::Collision) != r.overlap)

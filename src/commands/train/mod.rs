@@ -8,10 +8,13 @@
 //! the replay's info over gRPC, the actors' `/metrics`, a progress bar.
 //! Every `train.eval_every` updates it fetches the latest weights and runs
 //! `train.eval_trials` greedy trials in this process (the same seeded trials
-//! each time), appends them to `<out>/curve.csv`, reports them to the
-//! learner (so its best checkpoint follows them), keeps the best weights in
-//! `<out>/best/`, and confirms an evaluation that meets the target on
-//! `train.confirm_trials` trials. It ends at the learner's update budget,
+//! each time, at most `train.eval_share` of the wall time), appends them to
+//! `<out>/curve.csv`, keeps the weights in `<out>/last/` and reports them
+//! to the learner (so its best checkpoint follows the same rule). Weights
+//! whose mean undiscounted return beats the best so far, or that meet the
+//! target, are re-measured on `train.confirm_trials` trials; the best by
+//! that figure are kept in `<out>/best/`, and the target counts as reached
+//! when such a figure meets it. It ends at the learner's update budget,
 //! the time budget, the target (`train.stop_at_target`) or Ctrl-C, stopping
 //! actors, then the learner (last checkpoint), then the replay (last
 //! snapshot).
@@ -473,6 +476,9 @@ impl Session {
         let bar = progress_bar(budget);
         // The first evaluation is of the weights the run starts from.
         let mut next_eval = 0;
+        // Evaluations take at most `eval_share` of the wall time: the next
+        // one starts no earlier than this.
+        let mut eval_gate = Instant::now();
         let mut rate = (Instant::now(), self.run.previous.env_steps);
         let mut steps_per_s = 0.0;
         let mut last_eval = "no evaluation yet".to_owned();
@@ -511,10 +517,13 @@ impl Session {
                 .progress(self.updates, self.env_steps, steps_per_s);
             bar.set_position(self.updates);
             bar.set_message(format!("{:.0} env steps/s | {last_eval}", steps_per_s));
-            if self.updates >= next_eval {
+            if self.updates >= next_eval && Instant::now() >= eval_gate {
                 next_eval = self.updates + c.train.eval_every;
-                match self.evaluate_latest(c.train.eval_trials).await {
-                    Ok(e) => {
+                let began = Instant::now();
+                let evaluated = self.evaluate_latest(c.train.eval_trials, &bar).await;
+                eval_gate = began + began.elapsed().div_f64(c.train.eval_share);
+                match evaluated {
+                    Ok((e, reached)) => {
                         last_eval = e.brief();
                         bar.suspend(|| {
                             tracing::info!(
@@ -525,7 +534,7 @@ impl Session {
                                 e.brief()
                             );
                         });
-                        if self.confirm_if_met(&e, &bar).await? && c.train.stop_at_target {
+                        if reached && c.train.stop_at_target {
                             break End::Target;
                         }
                     }
@@ -581,9 +590,16 @@ impl Session {
     }
 
     /// Fetches the latest weights and evaluates them greedily on
-    /// `trials` trials of the run's scenario; records and reports the
-    /// result.
-    async fn evaluate_latest(&mut self, trials: u64) -> anyhow::Result<Evaluation> {
+    /// `trials` trials of the run's scenario; records (curve, `last/`) and
+    /// reports the result. Weights that score above the best so far, or
+    /// meet a target not yet reached, are re-measured on `confirm_trials`
+    /// ([`Self::consider_best`]). Returns the evaluation and whether the
+    /// target was reached by it.
+    async fn evaluate_latest(
+        &mut self,
+        trials: u64,
+        bar: &ProgressBar,
+    ) -> anyhow::Result<(Evaluation, bool)> {
         let (version, safetensors) = if self.learner.exited().is_none() {
             let w = self
                 .learner_client
@@ -596,23 +612,47 @@ impl Session {
         };
         let e = self.evaluate_bytes(&safetensors, version, trials).await?;
         self.record(&e, &safetensors)?;
+        self.report(&e).await;
+        let c = &self.run.config.train;
+        let better = self
+            .summary
+            .best
+            .as_ref()
+            .is_none_or(|b| e.score() > b.score());
+        let may_reach = self.summary.reached.is_none()
+            && c.met(e.success_rate, e.collision_rate, e.mean_time_s);
+        let reached = if better || may_reach {
+            self.consider_best(&safetensors, &e, bar).await?
+        } else {
+            false
+        };
+        Ok((e, reached))
+    }
+
+    /// Tells the learner how `e`'s weights did, so its best checkpoint
+    /// follows the same rule (`learner.best_metric`, `mean_return` by
+    /// default).
+    async fn report(&mut self, e: &Evaluation) {
+        if self.learner.exited().is_some() {
+            return;
+        }
         let mut report = BTreeMap::new();
         report.insert("success_rate".to_owned(), e.success_rate);
         report.insert("collision_rate".to_owned(), e.collision_rate);
         report.insert("timeout_rate".to_owned(), e.timeout_rate);
-        report.insert("score".to_owned(), e.score());
+        if let Some(r) = e.mean_return {
+            report.insert("mean_return".to_owned(), r);
+        }
         if let Some(t) = e.mean_time_s {
             report.insert("mean_time_s".to_owned(), t);
         }
-        if self.learner.exited().is_none()
-            && let Err(err) = self
-                .learner_client
-                .report_evaluation(e.weights_version, report)
-                .await
+        if let Err(err) = self
+            .learner_client
+            .report_evaluation(e.weights_version, report)
+            .await
         {
             tracing::warn!(error = %err, "reporting the evaluation to the learner");
         }
-        Ok(e)
     }
 
     /// The weights of the newest checkpoint on disk and their version (for
@@ -664,29 +704,16 @@ impl Session {
             mean_time_s: report.mean_time_s,
             mean_brake_s: report.mean_brake_s,
             loss: self.loss,
+            mean_return: Some(report.mean_return),
         })
     }
 
     /// Appends to the curve, updates the summary and metrics, and keeps the
-    /// weights when they are the best so far.
+    /// weights in `last/`.
     fn record(&mut self, e: &Evaluation, safetensors: &[u8]) -> anyhow::Result<()> {
         self.curve.append(e)?;
         self.metrics.evaluated(e);
-        if self
-            .summary
-            .best
-            .as_ref()
-            .is_none_or(|b| e.score() > b.score())
-        {
-            let dir = self.run.out.join("best");
-            std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-            write_atomic(&dir.join("weights.safetensors"), safetensors)?;
-            write_atomic(
-                &dir.join("evaluation.json"),
-                serde_json::to_string_pretty(e)?.as_bytes(),
-            )?;
-            self.summary.best = Some(e.clone());
-        }
+        keep(&self.run.out.join("last"), e, safetensors)?;
         self.summary.last = Some(e.clone());
         self.update_summary();
         self.summary.save(&self.run.out)
@@ -699,44 +726,62 @@ impl Session {
         self.summary.transitions = self.transitions;
     }
 
-    /// `true` when the target is reached for the first time: `e`
-    /// meets it and the best weights confirm it.
-    async fn confirm_if_met(&mut self, e: &Evaluation, bar: &ProgressBar) -> anyhow::Result<bool> {
-        if self.summary.reached.is_some() {
-            return Ok(false);
-        }
-        let c = &self.run.config.train;
-        if !c.met(e.success_rate, e.collision_rate, e.mean_time_s) {
-            return Ok(false);
-        }
-        self.confirm(bar).await
-    }
-
-    /// Confirms the target on `confirm_trials` trials of the best weights
-    /// (those just evaluated); records when it holds.
-    async fn confirm(&mut self, bar: &ProgressBar) -> anyhow::Result<bool> {
+    /// Re-measures the weights of periodic evaluation `e` on
+    /// `confirm_trials` trials (10,000 by default: the periodic ones are
+    /// small, and a best picked on them alone would be picked on noise);
+    /// keeps them in `best/` when the re-measured score is the best so far,
+    /// and records the target as reached when it meets it for the first
+    /// time. Returns whether it did.
+    async fn consider_best(
+        &mut self,
+        safetensors: &[u8],
+        e: &Evaluation,
+        bar: &ProgressBar,
+    ) -> anyhow::Result<bool> {
         let c = self.run.config.train.clone();
-        let path = self.run.out.join("best").join("weights.safetensors");
-        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-        let version = self.summary.best.as_ref().map_or(0, |b| b.weights_version);
-        let e = self
-            .evaluate_bytes(&bytes, version, c.confirm_trials)
-            .await?;
-        let ok = c.met(e.success_rate, e.collision_rate, e.mean_time_s);
+        let confirmed = if c.confirm_trials > e.trials {
+            let mut m = self
+                .evaluate_bytes(safetensors, e.weights_version, c.confirm_trials)
+                .await?;
+            m.updates = e.updates;
+            self.report(&m).await;
+            m
+        } else {
+            e.clone()
+        };
+        let best = self
+            .summary
+            .best
+            .as_ref()
+            .is_none_or(|b| confirmed.score() > b.score());
+        if best {
+            keep(&self.run.out.join("best"), &confirmed, safetensors)?;
+            self.summary.best = Some(confirmed.clone());
+        }
+        let reached = self.summary.reached.is_none()
+            && c.met(
+                confirmed.success_rate,
+                confirmed.collision_rate,
+                confirmed.mean_time_s,
+            );
         bar.suspend(|| {
             tracing::info!(
-                trials = e.trials,
-                "confirmation: {} -> target {}",
-                e.brief(),
-                if ok { "reached" } else { "not reached" }
+                trials = confirmed.trials,
+                mean_return = confirmed.mean_return,
+                "re-measured: {}{}{}",
+                confirmed.brief(),
+                if best { " -> best" } else { "" },
+                if reached { " -> target reached" } else { "" }
             );
         });
-        if ok {
+        if reached {
             self.metrics.reached();
-            self.summary.reached = Some(Reached { evaluation: e });
-            self.summary.save(&self.run.out)?;
+            self.summary.reached = Some(Reached {
+                evaluation: confirmed,
+            });
         }
-        Ok(ok)
+        self.summary.save(&self.run.out)?;
+        Ok(reached)
     }
 
     /// Stops actors, evaluates the final weights, stops the learner (last
@@ -747,18 +792,19 @@ impl Session {
             a.stop(GRACE).await;
         }
         if end.is_some() {
+            // The count of the weights about to be evaluated, not the last
+            // tick's (updates go on between ticks).
+            if let Ok(st) = self.learner_client.status().await {
+                self.updates = st.update_step;
+                self.loss = st.loss;
+            }
+            // A run that ends (budget, minutes, Ctrl-C) on weights that
+            // score best or meet the target still gets them re-measured.
             match self
-                .evaluate_latest(self.run.config.train.eval_trials)
+                .evaluate_latest(self.run.config.train.eval_trials, &ProgressBar::hidden())
                 .await
             {
-                Ok(e) => {
-                    eprintln!("final evaluation: {}", e.brief());
-                    // A run that ends (budget, minutes, Ctrl-C) on weights
-                    // that meet the target still gets them confirmed.
-                    if let Err(err) = self.confirm_if_met(&e, &ProgressBar::hidden()).await {
-                        tracing::warn!(error = %format!("{err:#}"), "confirming the target");
-                    }
-                }
+                Ok((e, _)) => eprintln!("final evaluation: {}", e.brief()),
                 Err(e) => tracing::warn!(error = %format!("{e:#}"), "final evaluation"),
             }
         }
@@ -809,6 +855,16 @@ impl Session {
         }
         Ok(())
     }
+}
+
+/// Writes `safetensors` and `e` (as `evaluation.json`) into `dir`.
+fn keep(dir: &Path, e: &Evaluation, safetensors: &[u8]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_atomic(&dir.join("weights.safetensors"), safetensors)?;
+    write_atomic(
+        &dir.join("evaluation.json"),
+        serde_json::to_string_pretty(e)?.as_bytes(),
+    )
 }
 
 fn died(role: &Role, status: std::process::ExitStatus) -> anyhow::Error {

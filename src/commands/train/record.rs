@@ -38,14 +38,21 @@ pub struct Evaluation {
     pub mean_brake_s: f64,
     /// The learner's loss at the time.
     pub loss: f64,
+    /// Mean undiscounted return per trial under the scenario's rewards;
+    /// `None` in curves written before it was recorded.
+    #[serde(default)]
+    pub mean_return: Option<f64>,
 }
 
 impl Evaluation {
-    /// Higher is better: success, with each collision counting ten times
-    /// against it, as in the reward (+1 success, -10 collision); used to
-    /// keep the best weights.
+    /// Higher is better: the mean undiscounted return per trial, the task's
+    /// own objective (+1 success, -10 collision, -0.01 a step, so a timeout
+    /// costs its whole episode of step rewards); used to keep the best
+    /// weights. A network that never goes scores the full timeout cost,
+    /// not 0: an earlier rule (success - 10 x collisions) scored a timeout
+    /// as nothing and kept never-going networks over every one that tried.
     pub fn score(&self) -> f64 {
-        self.success_rate - 10.0 * self.collision_rate
+        self.mean_return.unwrap_or(f64::NEG_INFINITY)
     }
 
     /// A short line for the progress bar and the log.
@@ -139,7 +146,7 @@ pub struct Curve {
     path: PathBuf,
 }
 
-const HEADER: &str = "wall_seconds,updates,env_steps,transitions,weights_version,trials,success_rate,collision_rate,timeout_rate,mean_time_s,mean_brake_s,loss";
+const HEADER: &str = "wall_seconds,updates,env_steps,transitions,weights_version,trials,success_rate,collision_rate,timeout_rate,mean_time_s,mean_brake_s,loss,mean_return";
 
 impl Curve {
     /// `curve.csv` of `dir`, created with its header when missing.
@@ -160,7 +167,7 @@ impl Curve {
             .with_context(|| format!("opening {}", self.path.display()))?;
         writeln!(
             f,
-            "{:.1},{},{},{},{},{},{:.6},{:.6},{:.6},{},{:.4},{:.6}",
+            "{:.1},{},{},{},{},{},{:.6},{:.6},{:.6},{},{:.4},{:.6},{}",
             e.wall_seconds,
             e.updates,
             e.env_steps,
@@ -172,7 +179,8 @@ impl Curve {
             e.timeout_rate,
             e.mean_time_s.map_or(String::new(), |t| format!("{t:.4}")),
             e.mean_brake_s,
-            e.loss
+            e.loss,
+            e.mean_return.map_or(String::new(), |r| format!("{r:.6}"))
         )
         .with_context(|| format!("writing {}", self.path.display()))
     }
@@ -191,7 +199,8 @@ pub fn read_curve(path: &Path) -> anyhow::Result<Vec<Evaluation>> {
     for (i, line) in text.lines().enumerate().skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         let bad = || anyhow::anyhow!("{} line {}: not a curve row", path.display(), i + 1);
-        if f.len() != 12 {
+        // 12 columns: a curve from before mean_return was recorded.
+        if f.len() != 12 && f.len() != 13 {
             return Err(bad());
         }
         let num = |j: usize| f[j].parse::<f64>().map_err(|_| bad());
@@ -209,6 +218,10 @@ pub fn read_curve(path: &Path) -> anyhow::Result<Vec<Evaluation>> {
             mean_time_s: if f[9].is_empty() { None } else { Some(num(9)?) },
             mean_brake_s: num(10)?,
             loss: num(11)?,
+            mean_return: match f.get(12) {
+                Some(v) if !v.is_empty() => Some(num(12)?),
+                _ => None,
+            },
         });
     }
     Ok(out)
