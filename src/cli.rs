@@ -165,8 +165,9 @@ pub enum Command {
     /// Run an actor: M simulators stepped in parallel, one batched forward
     /// pass per step, n-step transitions pushed to the replay server.
     ///
-    /// Explores with the Ape-X epsilon ladder from its index and the actor
-    /// count (or acts greedily with --eval, pushing nothing and reporting
+    /// Explores with the Ape-X epsilon ladder over every environment of
+    /// every actor, from its index, the actor count and its environments
+    /// (or acts greedily with --eval, pushing nothing and reporting
     /// episodes to the metrics and outcome rates to the log); pushes over gRPC (any host) or
     /// iceoryx2 (the replay's host); follows the learner's weights and acts
     /// on the last ones while the learner is unreachable. Configured by the
@@ -503,6 +504,13 @@ pub struct EvalArgs {
     /// mistakes, the rest its calculated risks (ttg and creep actions).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=10_000))]
     pub risk: Option<u32>,
+    /// With --risk: also try *go* in the same K futures once a second
+    /// while the policy waits or creeps, and report the chances it passed
+    /// up (waits where going reached the goal in every future): timeouts
+    /// that had one, and how late the policy went after its first. Tells a
+    /// too cautious network from traffic that left no gap
+    #[arg(long, requires = "risk")]
+    pub missed: bool,
 }
 
 /// `crossroads tune-ttc`.

@@ -228,7 +228,10 @@ pub use policy::{
     NeverPolicy, Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy,
 };
 pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
-pub use risk::{GoDecision, RISKIEST_SHOWN, RiskBin, RiskReport, go_risk};
+pub use risk::{
+    GoDecision, MissedReport, PROBE_EVERY_STEPS, RISKIEST_SHOWN, RiskBin, RiskOptions, RiskReport,
+    SafeChance, go_risk,
+};
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};
 pub use traffic::{Car, EgoConflict, EgoFoe, Traffic, give_way_decel};

@@ -6,12 +6,19 @@
 //! works) from one that makes mistakes (collisions the state already
 //! decided), which call for different cures: the reward's trade-off, or
 //! the network.
+//!
+//! With [`RiskOptions::missed`] it also probes the other side: every second
+//! of waiting (or creeping), *go* is tried in the same forks, and a probe
+//! where every fork reached the goal is a chance the policy passed up. It
+//! tells a policy that times out because no gap came from one that let
+//! gaps go by (too conservative a Q(go), or too optimistic a Q(wait)).
 
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use serde::Serialize;
 
-use crate::action::{ActionSet, Control};
+use crate::action::Control;
 use crate::env::{Env, Outcome};
 use crate::error::SimError;
 use crate::eval::{EvalConfig, EvalReport, run_trials_watched, summarize};
@@ -24,6 +31,52 @@ const BIN_HIGHS: [f64; 5] = [0.0, 0.1, 0.5, 0.9, 1.0];
 
 /// How many decisions [`RiskReport::riskiest`] lists at most.
 pub const RISKIEST_SHOWN: usize = 20;
+
+/// Simulation steps between two probes of a trial's waiting decisions
+/// (5: once a second at 0.2 s steps).
+pub const PROBE_EVERY_STEPS: u32 = 5;
+
+/// How [`go_risk`] replays decisions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RiskOptions {
+    /// Forks per decision. At least 1.
+    pub futures: u32,
+    /// Whether to probe waiting decisions too (every
+    /// [`PROBE_EVERY_STEPS`]): would going there have reached the goal?
+    pub missed: bool,
+}
+
+/// A waiting decision at which going reached the goal in every fork.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SafeChance {
+    /// Trial index.
+    pub trial: u64,
+    /// Simulation step of the decision.
+    pub step: u32,
+}
+
+/// What the probes of waiting decisions found ([`RiskOptions::missed`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MissedReport {
+    /// Seconds between two probes of a trial at least.
+    pub probe_every_s: f64,
+    /// Waiting decisions probed.
+    pub probes: u64,
+    /// Of those, probes where going reached the goal in every fork.
+    pub safe: u64,
+    /// Trials that timed out.
+    pub timeouts: u64,
+    /// Of those, trials that passed up at least one safe chance.
+    pub timeouts_with_chance: u64,
+    /// Trials that went and had a safe chance before they did.
+    pub went_late: u64,
+    /// Median seconds from a trial's first safe chance to its *go*, over
+    /// `went_late` (`None` when there are none).
+    pub median_delay_s: Option<f64>,
+    /// The first safe chance of timed-out trials, earliest trials first, at
+    /// most [`RISKIEST_SHOWN`].
+    pub passed_up: Vec<SafeChance>,
+}
 
 /// One *go* decision and what its forks did.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -72,43 +125,70 @@ pub struct RiskReport {
     /// The collided decisions and then the riskiest others, highest
     /// probability first, at most [`RISKIEST_SHOWN`].
     pub riskiest: Vec<GoDecision>,
+    /// Chances passed up, when waiting decisions were probed.
+    pub missed: Option<MissedReport>,
 }
 
 /// Evaluates `policy` like [`crate::evaluate`] and replays each of its *go*
-/// decisions in `futures` forks. The action set must have a *go* (TTG or
-/// Creep-and-Go). The report is the same whatever the number of threads.
+/// decisions in `options.futures` forks (and, with `options.missed`, tries
+/// *go* from its waiting decisions). The action set must have a *go* (TTG
+/// or Creep-and-Go). The report is the same whatever the number of
+/// threads.
 pub fn go_risk(
     scenario: &Arc<Scenario>,
     policy: &dyn Policy,
     config: &EvalConfig,
-    futures: u32,
+    options: RiskOptions,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<RiskReport, SimError> {
+    let futures = options.futures;
     if futures == 0 {
         return Err(SimError::EvalConfig(
             "risk needs at least 1 future per decision".to_owned(),
         ));
     }
-    if config.action_set == ActionSet::Sequential {
-        return Err(SimError::EvalConfig(format!(
+    let go = config.action_set.absorbing_go().ok_or_else(|| {
+        SimError::EvalConfig(format!(
             "risk replays go decisions; the {} action set has none (use ttg or creep)",
             config.action_set.name()
-        )));
-    }
+        ))
+    })?;
     let found = Mutex::new(Vec::new());
+    let probes = Mutex::new(Probes::default());
     let watch = |trial: u64, env: &Env, action: usize| -> Result<(), SimError> {
+        let base = !episode_seed(config.seed, trial);
+        // Outcomes of going now in each fork: (collided, succeeded).
+        let forks = || -> Result<(u32, u32), SimError> {
+            let (mut collided, mut succeeded) = (0u32, 0u32);
+            for j in 0..futures {
+                let mut fork = env.fork(episode_seed(base, u64::from(j)));
+                fork.step(go)?;
+                match fork.metrics().outcome {
+                    Some(Outcome::Collision) => collided += 1,
+                    Some(Outcome::Success) => succeeded += 1,
+                    _ => {}
+                }
+            }
+            Ok((collided, succeeded))
+        };
         if config.action_set.decode(action)? != Control::Go {
+            if options.missed {
+                let step = env.steps();
+                let due = probes
+                    .lock()
+                    .map_err(|_| SimError::EvalConfig("a risk worker panicked".to_owned()))?
+                    .due(trial, step);
+                if due {
+                    let (_, succeeded) = forks()?;
+                    probes
+                        .lock()
+                        .map_err(|_| SimError::EvalConfig("a risk worker panicked".to_owned()))?
+                        .record(trial, step, succeeded == futures);
+                }
+            }
             return Ok(());
         }
-        let base = !episode_seed(config.seed, trial);
-        let mut collided = 0u32;
-        for j in 0..futures {
-            let mut fork = env.fork(episode_seed(base, u64::from(j)));
-            fork.step(action)?;
-            if fork.metrics().outcome == Some(Outcome::Collision) {
-                collided += 1;
-            }
-        }
+        let (collided, _) = forks()?;
         let decision = GoDecision {
             trial,
             step: env.steps(),
@@ -133,7 +213,99 @@ pub fn go_risk(
         .filter(|r| r.outcome == Outcome::Collision)
         .count() as u64;
     let eval = summarize(scenario.name(), &policy.name(), config, &results);
-    Ok(report(eval, futures, decisions, collisions))
+    let missed = options.missed.then(|| {
+        probes
+            .into_inner()
+            .unwrap_or_default()
+            .report(&results, &decisions, scenario.dt())
+    });
+    let mut r = report(eval, futures, decisions, collisions);
+    r.missed = missed;
+    Ok(r)
+}
+
+/// The probes of waiting decisions, gathered across worker threads.
+#[derive(Debug, Default)]
+struct Probes {
+    /// Per trial, the step of its last probe.
+    last: HashMap<u64, u32>,
+    /// Probes made.
+    count: u64,
+    /// The safe ones.
+    safe: Vec<SafeChance>,
+}
+
+impl Probes {
+    /// Whether a waiting decision of `trial` at `step` is due a probe, a
+    /// [`PROBE_EVERY_STEPS`] after the last (each trial runs on one thread
+    /// in step order).
+    fn due(&mut self, trial: u64, step: u32) -> bool {
+        match self.last.get(&trial) {
+            Some(&last) if step < last + PROBE_EVERY_STEPS => false,
+            _ => {
+                self.last.insert(trial, step);
+                true
+            }
+        }
+    }
+
+    fn record(&mut self, trial: u64, step: u32, safe: bool) {
+        self.count += 1;
+        if safe {
+            self.safe.push(SafeChance { trial, step });
+        }
+    }
+
+    /// Which trials passed up chances: timed out after one, or went later.
+    fn report(
+        mut self,
+        results: &[crate::eval::TrialResult],
+        decisions: &[GoDecision],
+        dt: f64,
+    ) -> MissedReport {
+        self.safe.sort_by_key(|c| (c.trial, c.step));
+        let mut first: HashMap<u64, u32> = HashMap::new();
+        for c in &self.safe {
+            first.entry(c.trial).or_insert(c.step);
+        }
+        let timeouts = results
+            .iter()
+            .filter(|r| r.outcome == Outcome::Timeout)
+            .count() as u64;
+        let mut passed_up: Vec<SafeChance> = results
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.outcome == Outcome::Timeout)
+            .filter_map(|(i, _)| {
+                first.get(&(i as u64)).map(|&step| SafeChance {
+                    trial: i as u64,
+                    step,
+                })
+            })
+            .collect();
+        let timeouts_with_chance = passed_up.len() as u64;
+        passed_up.truncate(RISKIEST_SHOWN);
+        let mut delays: Vec<f64> = decisions
+            .iter()
+            .filter_map(|d| {
+                first
+                    .get(&d.trial)
+                    .filter(|&&s| s < d.step)
+                    .map(|&s| f64::from(d.step - s) * dt)
+            })
+            .collect();
+        delays.sort_by(f64::total_cmp);
+        MissedReport {
+            probe_every_s: f64::from(PROBE_EVERY_STEPS) * dt,
+            probes: self.count,
+            safe: self.safe.len() as u64,
+            timeouts,
+            timeouts_with_chance,
+            went_late: delays.len() as u64,
+            median_delay_s: (!delays.is_empty()).then(|| delays[delays.len() / 2]),
+            passed_up,
+        }
+    }
 }
 
 /// Bins `decisions` and picks the riskiest; `collisions` counts every
@@ -188,14 +360,23 @@ fn report(
         foreseeable,
         other_collisions: collisions - collided_after_go,
         riskiest: decisions,
+        missed: None,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::action::ActionSet;
     use crate::env::EnvConfig;
     use crate::policy::parse_policy;
+
+    fn opts(futures: u32) -> RiskOptions {
+        RiskOptions {
+            futures,
+            missed: false,
+        }
+    }
 
     fn left() -> Arc<Scenario> {
         Arc::new(Scenario::builtin("left").unwrap())
@@ -228,7 +409,7 @@ mod tests {
         // Going at random goes into gaps of every size.
         let policy = parse_policy("random").unwrap();
         let config = EvalConfig::new(ActionSet::Ttg, 400, 5);
-        let r = go_risk(&left(), policy.as_ref(), &config, 8, &|_| {}).unwrap();
+        let r = go_risk(&left(), policy.as_ref(), &config, opts(8), &|_| {}).unwrap();
         let collisions = (r.eval.collision_rate * 400.0).round() as u64;
         assert!(collisions > 0, "{:?}", r.eval);
         assert_eq!(r.decisions, r.bins.iter().map(|b| b.decisions).sum::<u64>());
@@ -251,6 +432,39 @@ mod tests {
     }
 
     #[test]
+    fn probes_find_the_chances_a_policy_passes_up() {
+        // Never going on Left (0.2 cars/s a lane) times out every trial,
+        // though gaps come by; every timeout passed one up.
+        let never = parse_policy("never").unwrap();
+        let config = EvalConfig::new(ActionSet::Ttg, 50, 3);
+        let options = RiskOptions {
+            futures: 8,
+            missed: true,
+        };
+        let r = go_risk(&left(), never.as_ref(), &config, options, &|_| {}).unwrap();
+        let m = r.missed.expect("probed");
+        assert_eq!((r.decisions, m.timeouts), (0, 50));
+        // 20 s of waiting: one probe a second at most (waits of 8 steps
+        // make some seconds share a probe).
+        assert!(m.probes > 50 * 10 && m.probes <= 50 * 20, "{m:?}");
+        assert!(m.timeouts_with_chance >= 45, "{m:?}");
+        assert!(m.safe > 0 && m.safe < m.probes, "{m:?}");
+        assert_eq!(m.went_late, 0);
+        assert!(m.passed_up.windows(2).all(|w| w[0].trial < w[1].trial));
+
+        // A cautious TTC rule (6 s, the HCM's gap) succeeds but lets safe
+        // gaps go by first; without probes nothing is reported.
+        let cautious = parse_policy("ttc:6").unwrap();
+        let r = go_risk(&left(), cautious.as_ref(), &config, options, &|_| {}).unwrap();
+        let m = r.missed.expect("probed");
+        assert!(m.went_late > 0, "{m:?}");
+        assert!(m.median_delay_s.is_some_and(|d| d > 0.0), "{m:?}");
+        let plain = go_risk(&left(), cautious.as_ref(), &config, opts(8), &|_| {}).unwrap();
+        assert_eq!(plain.missed, None);
+        assert_eq!(plain.eval, r.eval, "probing does not change the trials");
+    }
+
+    #[test]
     fn risk_is_the_same_on_any_number_of_threads() {
         let policy = parse_policy("random").unwrap();
         let config = EvalConfig::new(ActionSet::Ttg, 200, 9);
@@ -259,7 +473,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| go_risk(&left(), policy.as_ref(), &config, 4, &|_| {}).unwrap())
+                .install(|| go_risk(&left(), policy.as_ref(), &config, opts(4), &|_| {}).unwrap())
         };
         assert_eq!(on(1), on(2));
     }
@@ -268,10 +482,10 @@ mod tests {
     fn risk_needs_a_go_and_a_future() {
         let policy = parse_policy("random").unwrap();
         let seq = EvalConfig::new(ActionSet::Sequential, 10, 0);
-        let err = go_risk(&left(), policy.as_ref(), &seq, 4, &|_| {}).unwrap_err();
+        let err = go_risk(&left(), policy.as_ref(), &seq, opts(4), &|_| {}).unwrap_err();
         assert!(err.to_string().contains("sequential"), "{err}");
         let ttg = EvalConfig::new(ActionSet::Ttg, 10, 0);
-        let err = go_risk(&left(), policy.as_ref(), &ttg, 0, &|_| {}).unwrap_err();
+        let err = go_risk(&left(), policy.as_ref(), &ttg, opts(0), &|_| {}).unwrap_err();
         assert!(err.to_string().contains("at least 1 future"), "{err}");
     }
 }

@@ -6,8 +6,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use crossroads_sim::{
-    Env, EnvConfig, EvalConfig, EvalReport, Interval, Policy, RiskReport, Scenario, evaluate,
-    go_risk, parse_policy,
+    Env, EnvConfig, EvalConfig, EvalReport, Interval, Policy, RiskOptions, RiskReport, Scenario,
+    evaluate, go_risk, parse_policy,
 };
 use serde::Serialize;
 
@@ -37,6 +37,8 @@ struct JsonReport<'a> {
     mean_brake_ci95: Interval,
     mean_brake_light_ci95: Interval,
     mean_wait_ci95: Option<Interval>,
+    mean_return: f64,
+    mean_return_ci95: Interval,
     wall_seconds: f64,
 }
 
@@ -82,7 +84,11 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
     let start = std::time::Instant::now();
     let (report, risk) = match args.risk {
         Some(futures) => {
-            let risk = go_risk(&scenario, policy.as_ref(), &config, futures, &|n| {
+            let options = RiskOptions {
+                futures,
+                missed: args.missed,
+            };
+            let risk = go_risk(&scenario, policy.as_ref(), &config, options, &|n| {
                 bar.inc(n)
             })?;
             (risk.eval.clone(), Some(risk))
@@ -155,6 +161,30 @@ pub fn risk_text(r: &RiskReport, seed: u64) -> String {
             );
         }
     }
+    if let Some(m) = &r.missed {
+        out += &format!(
+            "  waits probed {} (one every {:.0} s at most), going reached the goal in every future at {}\n\
+             \x20 timeouts {} of which {} passed up a safe chance; {} trials went after one, {} later (median)\n",
+            m.probes,
+            m.probe_every_s,
+            m.safe,
+            m.timeouts,
+            m.timeouts_with_chance,
+            m.went_late,
+            m.median_delay_s
+                .map_or("-".to_owned(), |d| format!("{d:.1} s")),
+        );
+        if !m.passed_up.is_empty() {
+            out +=
+                "  timeouts' first safe chance (render one with --seed S --trial I --step STEP):\n";
+            for c in &m.passed_up {
+                out += &format!(
+                    "    --seed {seed} --trial {:<6} --step {}\n",
+                    c.trial, c.step
+                );
+            }
+        }
+    }
     out
 }
 
@@ -179,6 +209,8 @@ fn json(r: &EvalReport, wall_seconds: f64) -> JsonReport<'_> {
         mean_brake_ci95: r.mean_brake_ci,
         mean_brake_light_ci95: r.mean_brake_light_ci,
         mean_wait_ci95: r.mean_wait_ci,
+        mean_return: r.mean_return,
+        mean_return_ci95: r.mean_return_ci,
         wall_seconds,
     }
 }
@@ -198,6 +230,10 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
         (Some(t), Some(ci)) => secs(t, ci),
         _ => "      -     (no successful run)".to_owned(),
     };
+    let ret = format!(
+        "{:7.3}     [{:.3}, {:.3}]",
+        r.mean_return, r.mean_return_ci.low, r.mean_return_ci.high
+    );
     let wait = match (r.mean_wait_s, &r.mean_wait_ci) {
         (Some(t), Some(ci)) => secs(t, ci),
         _ => "      -     (never went)".to_owned(),
@@ -211,7 +247,8 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
          \x20 mean time    {time}   (successful runs)\n\
          \x20 mean wait    {wait}   (before go, runs that went)\n\
          \x20 mean brake   {b}   (traffic braking per run)\n\
-         \x20 brake light  {l}   (per run, SUMO's rule)\n",
+         \x20 brake light  {l}   (per run, SUMO's rule)\n\
+         \x20 mean return  {ret}   (per run, undiscounted, the scenario's rewards)\n",
         policy = r.policy,
         scenario = r.scenario,
         actions = r.action_set,
@@ -223,5 +260,6 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
         t = pct(r.timeout_rate, &r.timeout_ci),
         b = secs(r.mean_brake_s, &r.mean_brake_ci),
         l = secs(r.mean_brake_light_s, &r.mean_brake_light_ci),
+        ret = ret,
     )
 }

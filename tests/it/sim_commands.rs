@@ -152,6 +152,49 @@ fn eval_risk_bins_every_go_and_names_the_riskiest_trials() {
 }
 
 #[test]
+fn eval_missed_counts_the_chances_a_policy_passes_up() {
+    // Never going times out every trial of Left; each passed up a gap.
+    let args = [
+        "eval",
+        "--policy",
+        "never",
+        "--scenario",
+        "left",
+        "--trials",
+        "40",
+        "--seed",
+        "2",
+        "--risk",
+        "4",
+        "--missed",
+    ];
+    let (ok, stdout, stderr) = crossroads(&[&args[..], &["--json"]].concat());
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    let m = &v["risk"]["missed"];
+    assert_eq!(m["timeouts"], 40, "{v}");
+    let with_chance = m["timeouts_with_chance"].as_u64().expect("count");
+    assert!(with_chance >= 35, "{v}");
+    let first = &m["passed_up"][0];
+    let (ok, text, stderr) = crossroads(&args);
+    assert!(ok, "{stderr}");
+    assert!(
+        text.contains(&format!("timeouts 40 of which {with_chance} passed up")),
+        "{text}"
+    );
+    let shown = format!(
+        "--seed 2 --trial {:<6} --step {}",
+        first["trial"].as_u64().expect("trial"),
+        first["step"]
+    );
+    assert!(text.contains(&shown), "{shown} in\n{text}");
+    // Without --risk there are no futures to probe in.
+    let (ok, _, stderr) = crossroads(&["eval", "--policy", "never", "--missed"]);
+    assert!(!ok);
+    assert!(stderr.contains("--risk"), "{stderr}");
+}
+
+#[test]
 fn tune_ttc_writes_csv_and_png() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().to_str().expect("utf-8");
