@@ -23,9 +23,10 @@ pub struct TrainConfig {
     /// with training, and `confirm_trials` and `reproduce` measure the
     /// 10,000-trial figures. At least 1.
     pub eval_trials: u64,
-    /// Largest share of wall time the evaluations may take: the next one
-    /// waits (past `eval_every`) until the last one's duration is at most
-    /// this share of the time since it began. In (0, 1].
+    /// Largest share of wall time the periodic evaluations may take: the
+    /// next one waits (past `eval_every`) until the last one's duration is
+    /// at most this share of the time since it began. A re-measure on
+    /// `confirm_trials` (rare: a new best) is not counted. In (0, 1].
     pub eval_share: f64,
     /// Seed of the evaluation trials (kept apart from the actors' seeds).
     pub eval_seed: u64,

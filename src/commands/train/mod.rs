@@ -476,8 +476,8 @@ impl Session {
         let bar = progress_bar(budget);
         // The first evaluation is of the weights the run starts from.
         let mut next_eval = 0;
-        // Evaluations take at most `eval_share` of the wall time: the next
-        // one starts no earlier than this.
+        // Periodic evaluations take at most `eval_share` of the wall time:
+        // the next one starts no earlier than this.
         let mut eval_gate = Instant::now();
         let mut rate = (Instant::now(), self.run.previous.env_steps);
         let mut steps_per_s = 0.0;
@@ -521,9 +521,12 @@ impl Session {
                 next_eval = self.updates + c.train.eval_every;
                 let began = Instant::now();
                 let evaluated = self.evaluate_latest(c.train.eval_trials, &bar).await;
-                eval_gate = began + began.elapsed().div_f64(c.train.eval_share);
                 match evaluated {
-                    Ok((e, reached)) => {
+                    Ok((e, reached, took)) => {
+                        // Gated on the periodic evaluation's own time: a
+                        // 10,000-trial re-measure of a new best is rare and
+                        // must not push the next evaluation minutes away.
+                        eval_gate = began + took.div_f64(c.train.eval_share);
                         last_eval = e.brief();
                         bar.suspend(|| {
                             tracing::info!(
@@ -538,7 +541,10 @@ impl Session {
                             break End::Target;
                         }
                     }
-                    Err(e) => tracing::warn!(error = %format!("{e:#}"), "evaluation failed"),
+                    Err(e) => {
+                        eval_gate = began + began.elapsed().div_f64(c.train.eval_share);
+                        tracing::warn!(error = %format!("{e:#}"), "evaluation failed");
+                    }
                 }
             }
             if budget > 0 && self.updates >= budget {
@@ -593,13 +599,15 @@ impl Session {
     /// `trials` trials of the run's scenario; records (curve, `last/`) and
     /// reports the result. Weights that score above the best so far, or
     /// meet a target not yet reached, are re-measured on `confirm_trials`
-    /// ([`Self::consider_best`]). Returns the evaluation and whether the
-    /// target was reached by it.
+    /// ([`Self::consider_best`]). Returns the evaluation, whether the
+    /// target was reached by it, and how long the periodic evaluation took
+    /// (fetching and `trials` trials, without a re-measure).
     async fn evaluate_latest(
         &mut self,
         trials: u64,
         bar: &ProgressBar,
-    ) -> anyhow::Result<(Evaluation, bool)> {
+    ) -> anyhow::Result<(Evaluation, bool, Duration)> {
+        let began = Instant::now();
         let (version, safetensors) = if self.learner.exited().is_none() {
             let w = self
                 .learner_client
@@ -611,6 +619,7 @@ impl Session {
             self.newest_checkpoint()?
         };
         let e = self.evaluate_bytes(&safetensors, version, trials).await?;
+        let took = began.elapsed();
         self.record(&e, &safetensors)?;
         self.report(&e).await;
         let c = &self.run.config.train;
@@ -626,7 +635,7 @@ impl Session {
         } else {
             false
         };
-        Ok((e, reached))
+        Ok((e, reached, took))
     }
 
     /// Tells the learner how `e`'s weights did, so its best checkpoint
@@ -804,7 +813,7 @@ impl Session {
                 .evaluate_latest(self.run.config.train.eval_trials, &ProgressBar::hidden())
                 .await
             {
-                Ok((e, _)) => eprintln!("final evaluation: {}", e.brief()),
+                Ok((e, _, _)) => eprintln!("final evaluation: {}", e.brief()),
                 Err(e) => tracing::warn!(error = %format!("{e:#}"), "final evaluation"),
             }
         }
