@@ -508,7 +508,9 @@ pub struct EvalArgs {
     /// while the policy waits or creeps, and report the chances it passed
     /// up (waits where going reached the goal in every future): timeouts
     /// that had one, and how late the policy went after its first. Tells a
-    /// too cautious network from traffic that left no gap
+    /// too cautious network from traffic that left no gap. For a network,
+    /// also its Q(go) and best other value at safe and at doomed probes:
+    /// whether it tells them apart
     #[arg(long, requires = "risk")]
     pub missed: bool,
 }

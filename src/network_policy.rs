@@ -127,4 +127,16 @@ impl Policy for NetworkPolicy {
         }
         Ok(())
     }
+
+    fn values(&self, env: &Env) -> Result<Option<Vec<f32>>, SimError> {
+        let mut obs = vec![0.0f32; self.spec.input_len() as usize];
+        env.write_observation(&mut obs)?;
+        let slot = rayon::current_thread_index().unwrap_or(0) % self.nets.len();
+        let q = self.nets[slot]
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .infer(&obs, 1)
+            .map_err(|e| SimError::Policy(Box::new(e)))?;
+        Ok(Some(q.row(0).to_vec()))
+    }
 }

@@ -230,7 +230,7 @@ pub use policy::{
 pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
 pub use risk::{
     GoDecision, MissedReport, PROBE_EVERY_STEPS, RISKIEST_SHOWN, RiskBin, RiskOptions, RiskReport,
-    SafeChance, go_risk,
+    SafeChance, ValueMargins, ValueStats, go_risk,
 };
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};

@@ -12,6 +12,9 @@
 //! where every fork reached the goal is a chance the policy passed up. It
 //! tells a policy that times out because no gap came from one that let
 //! gaps go by (too conservative a Q(go), or too optimistic a Q(wait)).
+//! For a policy with values ([`Policy::values`]) the probes also read its
+//! Q-values, so [`ValueMargins`] says which of the two it is, and whether
+//! the network told safe moments from doomed ones at all.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -46,6 +49,13 @@ pub struct RiskOptions {
     pub missed: bool,
 }
 
+/// Seconds of a car at the speed limit that a probe's view must cover
+/// upstream on every conflicting lane to count as *in view*: about the
+/// ego's time to clear the junction from the creep limit. A safe chance out
+/// of view was luck the policy could not see; the value margins are read
+/// at probes in view only.
+pub const IN_VIEW_S: f64 = 5.0;
+
 /// A waiting decision at which going reached the goal in every fork.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SafeChance {
@@ -53,6 +63,8 @@ pub struct SafeChance {
     pub trial: u64,
     /// Simulation step of the decision.
     pub step: u32,
+    /// Whether the conflicting lanes were in view ([`IN_VIEW_S`]).
+    pub in_view: bool,
 }
 
 /// What the probes of waiting decisions found ([`RiskOptions::missed`]).
@@ -64,10 +76,17 @@ pub struct MissedReport {
     pub probes: u64,
     /// Of those, probes where going reached the goal in every fork.
     pub safe: u64,
+    /// Of those, probes with the conflicting lanes in view, [`IN_VIEW_S`]
+    /// at the speed limit upstream (metres in `in_view_m`).
+    pub safe_in_view: u64,
+    /// The view a probe needs to count as in view, metres.
+    pub in_view_m: f64,
     /// Trials that timed out.
     pub timeouts: u64,
     /// Of those, trials that passed up at least one safe chance.
     pub timeouts_with_chance: u64,
+    /// Of those, trials that passed up a safe chance in view.
+    pub timeouts_with_chance_in_view: u64,
     /// Trials that went and had a safe chance before they did.
     pub went_late: u64,
     /// Median seconds from a trial's first safe chance to its *go*, over
@@ -76,6 +95,63 @@ pub struct MissedReport {
     /// The first safe chance of timed-out trials, earliest trials first, at
     /// most [`RISKIEST_SHOWN`].
     pub passed_up: Vec<SafeChance>,
+    /// The policy's values at the probes, when it has values.
+    pub values: Option<ValueMargins>,
+}
+
+/// What a Q-network thought at the probed waits in view ([`IN_VIEW_S`]):
+/// at the safe ones (going reached the goal in every future) and at the
+/// doomed ones (going collided in more than half of them). A network that tells them apart but waits
+/// at safe moments has too high a Q(wait) or too low a Q(go) everywhere; one
+/// whose margins are alike on both has not learnt to read the state.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ValueMargins {
+    /// At safe probes.
+    pub safe: ValueStats,
+    /// At doomed probes.
+    pub doomed: ValueStats,
+}
+
+/// Medians of a network's values over a class of probes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ValueStats {
+    /// Probes in the class.
+    pub probes: u64,
+    /// Median Q(s, go) (`None` without probes).
+    pub q_go: Option<f64>,
+    /// Median of the best other action's value.
+    pub q_other: Option<f64>,
+    /// Median of Q(go) minus the best other (negative: the network waited).
+    pub margin: Option<f64>,
+    /// Share of the probes where the margin was above -0.05 (nearly
+    /// indifferent or going).
+    pub near: Option<f64>,
+}
+
+/// Margins closer than this to 0 count as nearly indifferent.
+const NEAR_MARGIN: f64 = 0.05;
+
+impl ValueStats {
+    /// The medians of `(q_go, q_other)` pairs.
+    fn of(mut pairs: Vec<(f64, f64)>) -> Self {
+        let median = |mut v: Vec<f64>| -> Option<f64> {
+            v.sort_by(f64::total_cmp);
+            (!v.is_empty()).then(|| v[v.len() / 2])
+        };
+        let n = pairs.len();
+        let margins: Vec<f64> = pairs.iter().map(|(g, o)| g - o).collect();
+        let near = (n > 0)
+            .then(|| margins.iter().filter(|&&m| m > -NEAR_MARGIN).count() as f64 / n as f64);
+        let others = pairs.iter().map(|p| p.1).collect();
+        pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Self {
+            probes: n as u64,
+            q_go: (n > 0).then(|| pairs[n / 2].0),
+            q_other: median(others),
+            margin: median(margins),
+            near,
+        }
+    }
 }
 
 /// One *go* decision and what its forks did.
@@ -154,7 +230,11 @@ pub fn go_risk(
         ))
     })?;
     let found = Mutex::new(Vec::new());
-    let probes = Mutex::new(Probes::default());
+    let in_view_m = IN_VIEW_S * scenario.spec().speed_limit;
+    let probes = Mutex::new(Probes {
+        in_view_m,
+        ..Probes::default()
+    });
     let watch = |trial: u64, env: &Env, action: usize| -> Result<(), SimError> {
         let base = !episode_seed(config.seed, trial);
         // Outcomes of going now in each fork: (collided, succeeded).
@@ -179,11 +259,32 @@ pub fn go_risk(
                     .map_err(|_| SimError::EvalConfig("a risk worker panicked".to_owned()))?
                     .due(trial, step);
                 if due {
-                    let (_, succeeded) = forks()?;
+                    let (collided, succeeded) = forks()?;
+                    let in_view = env.sees_conflicts(in_view_m);
+                    let values = if in_view {
+                        policy.values(env)?.map(|q| go_and_best_other(&q, go))
+                    } else {
+                        None
+                    };
+                    let class = if succeeded == futures {
+                        Some(true)
+                    } else if 2 * collided > futures {
+                        Some(false)
+                    } else {
+                        None
+                    };
                     probes
                         .lock()
                         .map_err(|_| SimError::EvalConfig("a risk worker panicked".to_owned()))?
-                        .record(trial, step, succeeded == futures);
+                        .record(
+                            SafeChance {
+                                trial,
+                                step,
+                                in_view,
+                            },
+                            class,
+                            values,
+                        );
                 }
             }
             return Ok(());
@@ -224,6 +325,17 @@ pub fn go_risk(
     Ok(r)
 }
 
+/// Q(go) and the best other action's value in `q`.
+fn go_and_best_other(q: &[f32], go: usize) -> (f64, f64) {
+    let other = q
+        .iter()
+        .enumerate()
+        .filter(|&(a, _)| a != go)
+        .map(|(_, &v)| f64::from(v))
+        .fold(f64::NEG_INFINITY, f64::max);
+    (f64::from(q[go]), other)
+}
+
 /// The probes of waiting decisions, gathered across worker threads.
 #[derive(Debug, Default)]
 struct Probes {
@@ -233,6 +345,14 @@ struct Probes {
     count: u64,
     /// The safe ones.
     safe: Vec<SafeChance>,
+    /// The view a probe needs to count as in view, metres.
+    in_view_m: f64,
+    /// The policy's (Q(go), best other) at safe and at doomed probes in
+    /// view.
+    safe_values: Vec<(f64, f64)>,
+    doomed_values: Vec<(f64, f64)>,
+    /// Whether the policy has values.
+    has_values: bool,
 }
 
 impl Probes {
@@ -249,10 +369,21 @@ impl Probes {
         }
     }
 
-    fn record(&mut self, trial: u64, step: u32, safe: bool) {
+    /// Records the probe at `at`: `class` is `Some(true)` when it was
+    /// safe, `Some(false)` when doomed; `values` the policy's (Q(go), best
+    /// other), read in view only.
+    fn record(&mut self, at: SafeChance, class: Option<bool>, values: Option<(f64, f64)>) {
         self.count += 1;
-        if safe {
-            self.safe.push(SafeChance { trial, step });
+        if class == Some(true) {
+            self.safe.push(at);
+        }
+        if let Some(v) = values {
+            self.has_values = true;
+            match class {
+                Some(true) => self.safe_values.push(v),
+                Some(false) => self.doomed_values.push(v),
+                None => {}
+            }
         }
     }
 
@@ -264,10 +395,21 @@ impl Probes {
         dt: f64,
     ) -> MissedReport {
         self.safe.sort_by_key(|c| (c.trial, c.step));
-        let mut first: HashMap<u64, u32> = HashMap::new();
+        let mut first: HashMap<u64, SafeChance> = HashMap::new();
+        let mut first_in_view: HashMap<u64, SafeChance> = HashMap::new();
         for c in &self.safe {
-            first.entry(c.trial).or_insert(c.step);
+            first.entry(c.trial).or_insert(*c);
+            if c.in_view {
+                first_in_view.entry(c.trial).or_insert(*c);
+            }
         }
+        let timeouts_with_chance_in_view = results
+            .iter()
+            .enumerate()
+            .filter(|(i, r)| {
+                r.outcome == Outcome::Timeout && first_in_view.contains_key(&(*i as u64))
+            })
+            .count() as u64;
         let timeouts = results
             .iter()
             .filter(|r| r.outcome == Outcome::Timeout)
@@ -276,12 +418,7 @@ impl Probes {
             .iter()
             .enumerate()
             .filter(|(_, r)| r.outcome == Outcome::Timeout)
-            .filter_map(|(i, _)| {
-                first.get(&(i as u64)).map(|&step| SafeChance {
-                    trial: i as u64,
-                    step,
-                })
-            })
+            .filter_map(|(i, _)| first.get(&(i as u64)).copied())
             .collect();
         let timeouts_with_chance = passed_up.len() as u64;
         passed_up.truncate(RISKIEST_SHOWN);
@@ -290,8 +427,8 @@ impl Probes {
             .filter_map(|d| {
                 first
                     .get(&d.trial)
-                    .filter(|&&s| s < d.step)
-                    .map(|&s| f64::from(d.step - s) * dt)
+                    .filter(|c| c.step < d.step)
+                    .map(|c| f64::from(d.step - c.step) * dt)
             })
             .collect();
         delays.sort_by(f64::total_cmp);
@@ -299,11 +436,18 @@ impl Probes {
             probe_every_s: f64::from(PROBE_EVERY_STEPS) * dt,
             probes: self.count,
             safe: self.safe.len() as u64,
+            safe_in_view: self.safe.iter().filter(|c| c.in_view).count() as u64,
+            in_view_m: self.in_view_m,
             timeouts,
             timeouts_with_chance,
+            timeouts_with_chance_in_view,
             went_late: delays.len() as u64,
             median_delay_s: (!delays.is_empty()).then(|| delays[delays.len() / 2]),
             passed_up,
+            values: self.has_values.then(|| ValueMargins {
+                safe: ValueStats::of(self.safe_values),
+                doomed: ValueStats::of(self.doomed_values),
+            }),
         }
     }
 }
@@ -462,6 +606,82 @@ mod tests {
         let plain = go_risk(&left(), cautious.as_ref(), &config, opts(8), &|_| {}).unwrap();
         assert_eq!(plain.missed, None);
         assert_eq!(plain.eval, r.eval, "probing does not change the trials");
+    }
+
+    /// Never goes, and says so with constant values: Q(go) 0.2 against
+    /// 0.5 for every other action.
+    #[derive(Debug)]
+    struct ValuedNever;
+
+    impl Policy for ValuedNever {
+        fn name(&self) -> String {
+            "valued-never".to_owned()
+        }
+        fn supports(&self, set: ActionSet) -> Result<(), SimError> {
+            crate::NeverPolicy.supports(set)
+        }
+        fn act(
+            &self,
+            envs: &[Env],
+            rngs: &mut [crate::PolicyRng],
+            actions: &mut [usize],
+        ) -> Result<(), SimError> {
+            crate::NeverPolicy.act(envs, rngs, actions)
+        }
+        fn values(&self, env: &Env) -> Result<Option<Vec<f32>>, SimError> {
+            let set = env.config().action_set;
+            let go = set.absorbing_go().expect("a go");
+            Ok(Some(
+                (0..set.num_actions())
+                    .map(|a| if a == go { 0.2 } else { 0.5 })
+                    .collect(),
+            ))
+        }
+    }
+
+    #[test]
+    fn probes_read_the_values_at_safe_and_doomed_waits() {
+        let config = EvalConfig::new(ActionSet::Ttg, 30, 3);
+        let options = RiskOptions {
+            futures: 8,
+            missed: true,
+        };
+        let r = go_risk(&left(), &ValuedNever, &config, options, &|_| {}).unwrap();
+        let m = r.missed.expect("probed");
+        let v = m.values.expect("the policy has values");
+        // Left has no occluders: every probe is in view.
+        assert_eq!(m.safe_in_view, m.safe);
+        assert_eq!(m.timeouts_with_chance_in_view, m.timeouts_with_chance);
+        assert_eq!(v.safe.probes, m.safe, "every safe probe read");
+        assert!(v.doomed.probes > 0, "{v:?}");
+        assert!(v.safe.probes + v.doomed.probes <= m.probes);
+        for s in [v.safe, v.doomed] {
+            assert_eq!(s.q_go, Some(0.2f32.into()));
+            assert_eq!(s.q_other, Some(0.5f32.into()));
+            let margin = s.margin.unwrap();
+            assert!((margin + 0.3).abs() < 1e-6, "{margin}");
+            assert_eq!(s.near, Some(0.0));
+        }
+        // A rule has no values.
+        let never = parse_policy("never").unwrap();
+        let r = go_risk(&left(), never.as_ref(), &config, options, &|_| {}).unwrap();
+        assert_eq!(r.missed.expect("probed").values, None);
+    }
+
+    #[test]
+    fn value_stats_are_medians_of_hand_made_pairs() {
+        // Margins 1, -1 and -0.02: median -0.02, two of three above -0.05.
+        let s = ValueStats::of(vec![(1.0, 0.0), (0.0, 1.0), (0.5, 0.52)]);
+        assert_eq!(s.probes, 3);
+        assert_eq!(s.q_go, Some(0.5));
+        assert_eq!(s.q_other, Some(0.52));
+        assert!((s.margin.unwrap() + 0.02).abs() < 1e-12);
+        assert!((s.near.unwrap() - 2.0 / 3.0).abs() < 1e-12);
+        let empty = ValueStats::of(Vec::new());
+        assert_eq!(
+            (empty.probes, empty.q_go, empty.margin, empty.near),
+            (0, None, None, None)
+        );
     }
 
     #[test]

@@ -164,16 +164,39 @@ pub fn risk_text(r: &RiskReport, seed: u64) -> String {
     if let Some(m) = &r.missed {
         out += &format!(
             "  waits probed {} (one every {:.0} s at most), going reached the goal in every future at {}\n\
-             \x20 timeouts {} of which {} passed up a safe chance; {} trials went after one, {} later (median)\n",
+             \x20 {} of them with the conflicting lanes in view ({:.0} m upstream)\n\
+             \x20 timeouts {} of which {} passed up a safe chance, {} one in view; {} trials went after one, {} later (median)\n",
             m.probes,
             m.probe_every_s,
             m.safe,
+            m.safe_in_view,
+            m.in_view_m,
             m.timeouts,
             m.timeouts_with_chance,
+            m.timeouts_with_chance_in_view,
             m.went_late,
             m.median_delay_s
                 .map_or("-".to_owned(), |d| format!("{d:.1} s")),
         );
+        if let Some(v) = &m.values {
+            let f = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:+.3}"));
+            out += "  the network's values at probed waits in view (medians; margin = Q(go) - best other):\n\
+                    \x20   probes                    count      Q(go)   best other   margin   margin > -0.05\n";
+            for (name, s) in [
+                ("safe (every future reached)", &v.safe),
+                ("doomed (most collided)", &v.doomed),
+            ] {
+                out += &format!(
+                    "    {name:<27} {:>7}   {:>8}   {:>10}   {:>6}   {}\n",
+                    s.probes,
+                    f(s.q_go),
+                    f(s.q_other),
+                    f(s.margin),
+                    s.near
+                        .map_or("-".to_owned(), |n| format!("{:.1} %", 100.0 * n)),
+                );
+            }
+        }
         if !m.passed_up.is_empty() {
             out +=
                 "  timeouts' first safe chance (render one with --seed S --trial I --step STEP):\n";

@@ -40,6 +40,13 @@ pub trait Policy: Send + Sync + std::fmt::Debug {
         rngs: &mut [PolicyRng],
         actions: &mut [usize],
     ) -> Result<(), SimError>;
+
+    /// The policy's value of each action in `env`'s present state, when it
+    /// has values (a Q-network); `None` for rules. A diagnostic
+    /// ([`crate::go_risk`] reads it at its probes), not used to act.
+    fn values(&self, _env: &Env) -> Result<Option<Vec<f32>>, SimError> {
+        Ok(None)
+    }
 }
 
 /// A baseline policy as parsed from its string form.
