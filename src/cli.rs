@@ -513,6 +513,11 @@ pub struct EvalArgs {
     /// whether it tells them apart
     #[arg(long, requires = "risk")]
     pub missed: bool,
+    /// List the first N collided and the first N timed-out trials, each
+    /// as the `--seed S --trial I` that `crossroads render` draws (any
+    /// action set; with --json, as a `failures` object).
+    #[arg(long, value_name = "N", default_value_t = 0, conflicts_with = "risk")]
+    pub failures: usize,
 }
 
 /// `crossroads tune-ttc`.

@@ -6,8 +6,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use crossroads_sim::{
-    Env, EnvConfig, EvalConfig, EvalReport, Interval, Policy, RiskOptions, RiskReport, Scenario,
-    evaluate, go_risk, parse_policy,
+    Env, EnvConfig, EvalConfig, EvalReport, Interval, Outcome, Policy, RiskOptions, RiskReport,
+    Scenario, TrialResult, go_risk, parse_policy, run_trials, summarize,
 };
 use serde::Serialize;
 
@@ -82,6 +82,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
     let bar = progress::bar(args.trials, "trials");
     bar.set_message(format!("{} on {}", policy.name(), scenario.name()));
     let start = std::time::Instant::now();
+    let mut failures = None;
     let (report, risk) = match args.risk {
         Some(futures) => {
             let options = RiskOptions {
@@ -93,10 +94,16 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
             })?;
             (risk.eval.clone(), Some(risk))
         }
-        None => (
-            evaluate(&scenario, policy.as_ref(), &config, &|n| bar.inc(n))?,
-            None,
-        ),
+        None => {
+            let results = run_trials(&scenario, policy.as_ref(), &config, &|n| bar.inc(n))?;
+            if args.failures > 0 {
+                failures = Some(Failures::first(&results, args.failures));
+            }
+            (
+                summarize(scenario.name(), &policy.name(), &config, &results),
+                None,
+            )
+        }
     };
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
@@ -106,14 +113,62 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
         if let (Some(risk), Some(object)) = (&risk, value.as_object_mut()) {
             object.insert("risk".to_owned(), risk_json(risk)?);
         }
+        if let (Some(f), Some(object)) = (&failures, value.as_object_mut()) {
+            object.insert("failures".to_owned(), serde_json::to_value(f)?);
+        }
         println!("{value}");
     } else {
         print!("{}", text(&report, wall));
         if let Some(risk) = &risk {
             print!("{}", risk_text(risk, args.seed));
         }
+        if let Some(f) = &failures {
+            print!("{}", f.text(args.seed));
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The first failed trials of an evaluation, by outcome, in trial order.
+#[derive(Debug, PartialEq, Serialize)]
+struct Failures {
+    /// Collided trials: (trial, seconds into the episode).
+    collisions: Vec<(u64, f64)>,
+    /// Timed-out trials.
+    timeouts: Vec<u64>,
+}
+
+impl Failures {
+    /// At most `n` of each kind.
+    fn first(results: &[TrialResult], n: usize) -> Self {
+        let trials = |o: Outcome| {
+            results
+                .iter()
+                .enumerate()
+                .filter(move |(_, r)| r.outcome == o)
+                .take(n)
+                .map(|(i, r)| (i as u64, r.time_s))
+        };
+        Self {
+            collisions: trials(Outcome::Collision).collect(),
+            timeouts: trials(Outcome::Timeout).map(|(i, _)| i).collect(),
+        }
+    }
+
+    fn text(&self, seed: u64) -> String {
+        let mut out = String::new();
+        if self.collisions.is_empty() && self.timeouts.is_empty() {
+            return "  no collisions or timeouts to list\n".to_owned();
+        }
+        out += "  failed trials (draw one with crossroads render ... --seed S --trial I):\n";
+        for (trial, t) in &self.collisions {
+            out += &format!("    --seed {seed} --trial {trial:<6} collided at {t:.1} s\n");
+        }
+        for trial in &self.timeouts {
+            out += &format!("    --seed {seed} --trial {trial:<6} timed out\n");
+        }
+        out
+    }
 }
 
 /// The risk part of `--json`: the report without its evaluation (already

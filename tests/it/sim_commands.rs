@@ -195,6 +195,87 @@ fn eval_missed_counts_the_chances_a_policy_passes_up() {
 }
 
 #[test]
+fn eval_failures_names_trials_that_render_draws_failing() {
+    let (ok, stdout, stderr) = crossroads(&[
+        "eval",
+        "--policy",
+        "random",
+        "--scenario",
+        "left",
+        "--trials",
+        "200",
+        "--seed",
+        "3",
+        "--failures",
+        "2",
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let eval: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let listed = |kind: &str| eval["failures"][kind].as_array().expect(kind).clone();
+    let (collisions, timeouts) = (listed("collisions"), listed("timeouts"));
+    let count = |rate: &str| (eval[rate].as_f64().expect(rate) * 200.0).round() as usize;
+    assert_eq!(collisions.len(), count("collision_rate").min(2), "{eval}");
+    assert_eq!(timeouts.len(), count("timeout_rate").min(2), "{eval}");
+    assert!(!collisions.is_empty(), "a random policy collides: {eval}");
+
+    // The first listed collision is the episode render draws as one.
+    let trial = collisions[0][0].as_u64().expect("trial").to_string();
+    let at = collisions[0][1].as_f64().expect("time");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let png = dir.path().join("collision.png");
+    let (ok, drawn, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "random",
+        "--scenario",
+        "left",
+        "--seed",
+        "3",
+        "--trial",
+        &trial,
+        "--out",
+        png.to_str().expect("utf-8 path"),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        drawn.contains(&format!("collision after {at:.1} s")),
+        "{drawn} vs trial {trial} at {at}"
+    );
+
+    let (ok, text, stderr) = crossroads(&[
+        "eval",
+        "--policy",
+        "random",
+        "--scenario",
+        "left",
+        "--trials",
+        "200",
+        "--seed",
+        "3",
+        "--failures",
+        "2",
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        text.contains(&format!(
+            "--seed 3 --trial {trial:<6} collided at {at:.1} s"
+        )),
+        "{text}"
+    );
+    let (ok, _, stderr) = crossroads(&[
+        "eval",
+        "--policy",
+        "random",
+        "--risk",
+        "2",
+        "--failures",
+        "1",
+    ]);
+    assert!(!ok && stderr.contains("--failures"), "{stderr}");
+}
+
+#[test]
 fn tune_ttc_writes_csv_and_png() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().to_str().expect("utf-8");
