@@ -6,8 +6,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use crossroads_sim::{
-    Env, EnvConfig, EvalConfig, EvalReport, Interval, Outcome, Policy, RiskOptions, RiskReport,
-    Scenario, TrialResult, go_risk, parse_policy, run_trials, summarize,
+    ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Interval, Outcome, Policy, RiskOptions,
+    RiskReport, Scenario, TrialResult, go_risk, parse_policy, run_trials, summarize,
 };
 use serde::Serialize;
 
@@ -314,6 +314,9 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
     );
     let wait = match (r.mean_wait_s, &r.mean_wait_ci) {
         (Some(t), Some(ci)) => secs(t, ci),
+        _ if r.action_set == ActionSet::Sequential.name() => {
+            "      -     (no go action)".to_owned()
+        }
         _ => "      -     (never went)".to_owned(),
     };
     format!(
