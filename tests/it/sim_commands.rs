@@ -196,20 +196,25 @@ fn eval_missed_counts_the_chances_a_policy_passes_up() {
 
 #[test]
 fn eval_failures_names_trials_that_render_draws_failing() {
-    let (ok, stdout, stderr) = crossroads(&[
-        "eval",
-        "--policy",
-        "random",
-        "--scenario",
-        "left",
-        "--trials",
-        "200",
-        "--seed",
-        "3",
-        "--failures",
-        "2",
-        "--json",
-    ]);
+    // 200 trials of seed 3 listing two failures of each kind.
+    let eval_failures = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "--policy",
+            "random",
+            "--scenario",
+            "left",
+            "--trials",
+            "200",
+            "--seed",
+            "3",
+            "--failures",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        crossroads(&args)
+    };
+    let (ok, stdout, stderr) = eval_failures(&["--json"]);
     assert!(ok, "{stderr}");
     let eval: serde_json::Value = serde_json::from_str(&stdout).expect("json");
     let listed = |kind: &str| eval["failures"][kind].as_array().expect(kind).clone();
@@ -243,19 +248,7 @@ fn eval_failures_names_trials_that_render_draws_failing() {
         "{drawn} vs trial {trial} at {at}"
     );
 
-    let (ok, text, stderr) = crossroads(&[
-        "eval",
-        "--policy",
-        "random",
-        "--scenario",
-        "left",
-        "--trials",
-        "200",
-        "--seed",
-        "3",
-        "--failures",
-        "2",
-    ]);
+    let (ok, text, stderr) = eval_failures(&[]);
     assert!(ok, "{stderr}");
     assert!(
         text.contains(&format!(
