@@ -481,6 +481,15 @@ pub struct PolicyArgs {
     /// Action set the policy drives.
     #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
     pub actions: ActionSet,
+    /// Put the policy behind the safety shield: each *go* is checked
+    /// against the cars the ego senses and phantom cars where its view
+    /// ends, and vetoed when any could come too close (ttg and creep
+    /// actions). Optionally override its assumptions, e.g.
+    /// `--shield margin_s=0.3,phantom_factor=1.1` (keys: speed_factor,
+    /// phantom_factor, slow_factor, margin_s, gap_m, follower_decel,
+    /// reaction_s).
+    #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]
+    pub shield: Option<String>,
 }
 
 /// `crossroads eval`.

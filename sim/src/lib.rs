@@ -201,6 +201,7 @@ mod render;
 mod risk;
 mod scenario;
 mod seed;
+mod shield;
 mod traffic;
 mod tune;
 
@@ -225,7 +226,8 @@ pub use occlusion::{ObstacleSpec, OcclusionLayout, OcclusionSpec, Side, line_of_
 pub use params::{EgoParams, Rewards, TrafficParams};
 pub use path::{Path, PathSpec, PieceSpec};
 pub use policy::{
-    NeverPolicy, Policy, PolicyRng, PolicySpec, RandomPolicy, TtcPolicy, parse_policy,
+    NeverPolicy, Policy, PolicyRng, PolicySpec, RandomPolicy, ShieldCounters, ShieldStats,
+    ShieldedPolicy, TtcPolicy, parse_policy,
 };
 pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
 pub use risk::{
@@ -234,5 +236,6 @@ pub use risk::{
 };
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};
+pub use shield::{SensedCar, ShieldParams, Threat, ThreatKind, check_go, sense};
 pub use traffic::{Car, EgoConflict, EgoFoe, Traffic, give_way_decel};
 pub use tune::{SweepPoint, TuneReport, default_thresholds, tune_ttc};

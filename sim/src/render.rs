@@ -122,6 +122,10 @@ pub mod palette {
     pub const GRID_OCCUPIED: Color = Color::rgb(0x30, 0x60, 0xe0).with_alpha(0.35);
     /// Overlay cells the sensor cannot see.
     pub const GRID_OCCLUDED: Color = Color::rgb(0x20, 0x20, 0x20).with_alpha(0.25);
+    /// Outline of a phantom car (the shield's assumption).
+    pub const PHANTOM: Color = Color::rgb(0x80, 0x20, 0xa0);
+    /// Outline of the car for which the shield vetoed a *go*.
+    pub const THREAT: Color = Color::rgb(0xe0, 0x20, 0xc0);
     /// Caption text.
     pub const TEXT: Color = Color::rgb(0x10, 0x10, 0x10);
 }
@@ -143,6 +147,11 @@ pub enum Layer {
     OccludedCar,
     /// The ego.
     Ego,
+    /// A car the safety shield assumes where the ego cannot see
+    /// ([`crate::sense`]).
+    Phantom,
+    /// The car for which the shield vetoed a *go* ([`crate::Threat`]).
+    Threat,
 }
 
 /// One thing to draw, in pixel coordinates.
@@ -303,6 +312,53 @@ impl Scene {
             background: palette::BACKGROUND,
             shapes,
             caption,
+        }
+    }
+
+    /// Adds what the safety shield considered at this state: its phantom
+    /// cars as dashed outlines, and when it vetoed a *go*, the car it
+    /// feared outlined and named in the caption.
+    pub fn mark_shield(
+        &mut self,
+        env: &Env,
+        view: &RenderView,
+        cars: &[crate::shield::SensedCar],
+        threat: Option<&crate::shield::Threat>,
+    ) {
+        let sc = env.scenario();
+        let tp = &sc.spec().traffic;
+        let px = |p: Vec2| view.px(p);
+        let outline = |car: &crate::shield::SensedCar| {
+            let pose = sc.lanes()[car.lane].path.pose_at(car.s - 0.5 * tp.length);
+            let r = OrientedRect::new(pose.pos, pose.heading, tp.length, tp.width);
+            let mut points: Vec<_> = r.corners().into_iter().map(px).collect();
+            points.push(points[0]);
+            points
+        };
+        for car in cars.iter().filter(|c| c.phantom) {
+            self.shapes.push(Shape::Line {
+                layer: Layer::Phantom,
+                points: outline(car),
+                color: palette::PHANTOM,
+                width: 2.0,
+                dashed: true,
+            });
+        }
+        if let Some(t) = threat {
+            self.shapes.push(Shape::Line {
+                layer: Layer::Threat,
+                points: outline(&t.car),
+                color: palette::THREAT,
+                width: 3.0,
+                dashed: false,
+            });
+            self.caption += &format!(
+                "  shield: go vetoed ({} {} on {}, {:.1} s)",
+                if t.car.phantom { "phantom" } else { "car" },
+                t.kind.name(),
+                sc.lanes()[t.car.lane].name,
+                t.after_s
+            );
         }
     }
 

@@ -7,7 +7,8 @@ use std::sync::Arc;
 use anyhow::Context;
 use crossroads_sim::{
     ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Interval, Outcome, Policy, RiskOptions,
-    RiskReport, Scenario, TrialResult, go_risk, parse_policy, run_trials, summarize,
+    RiskReport, Scenario, ShieldCounters, ShieldParams, ShieldedPolicy, TrialResult, go_risk,
+    parse_policy, run_trials, summarize,
 };
 use serde::Serialize;
 
@@ -42,13 +43,24 @@ struct JsonReport<'a> {
     wall_seconds: f64,
 }
 
+/// A policy as `crossroads eval` and `render` run it.
+#[derive(Debug)]
+pub struct Loaded {
+    /// The scenario.
+    pub scenario: Arc<Scenario>,
+    /// The policy, behind the shield with `--shield`.
+    pub policy: Box<dyn Policy>,
+    /// With `--shield`: its assumptions and counters.
+    pub shield: Option<(ShieldParams, Arc<ShieldCounters>)>,
+}
+
 /// The scenario and the policy that `args` name, checked to fit the action
 /// set; errors name the flag at fault.
-pub fn load(args: &PolicyArgs) -> anyhow::Result<(Arc<Scenario>, Box<dyn Policy>)> {
+pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
     let scenario = Arc::new(
         Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
     );
-    let policy: Box<dyn Policy> = match NetworkPolicy::load(Path::new(&args.policy))
+    let mut policy: Box<dyn Policy> = match NetworkPolicy::load(Path::new(&args.policy))
         .with_context(|| format!("--policy {}", args.policy))?
     {
         Some(net) => {
@@ -63,6 +75,13 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<(Arc<Scenario>, Box<dyn Policy>
             "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s> or random)",
         )?,
     };
+    let mut shield = None;
+    if let Some(spec) = &args.shield {
+        let params = ShieldParams::parse(spec).context("--shield")?;
+        let shielded = ShieldedPolicy::new(policy, params);
+        shield = Some((params, shielded.counters()));
+        policy = Box::new(shielded);
+    }
     policy.supports(args.actions).with_context(|| {
         format!(
             "--policy {} with --actions {}",
@@ -70,12 +89,20 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<(Arc<Scenario>, Box<dyn Policy>
             args.actions.name()
         )
     })?;
-    Ok((scenario, policy))
+    Ok(Loaded {
+        scenario,
+        policy,
+        shield,
+    })
 }
 
 /// Runs the evaluation and prints the report.
 pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
-    let (scenario, policy) = load(&args.run)?;
+    let Loaded {
+        scenario,
+        policy,
+        shield,
+    } = load(&args.run)?;
     anyhow::ensure!(args.trials > 0, "--trials must be at least 1");
     let config = EvalConfig::new(args.run.actions, args.trials, args.seed);
 
@@ -116,9 +143,23 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
         if let (Some(f), Some(object)) = (&failures, value.as_object_mut()) {
             object.insert("failures".to_owned(), serde_json::to_value(f)?);
         }
+        if let (Some((params, counters)), Some(object)) = (&shield, value.as_object_mut()) {
+            object.insert(
+                "shield".to_owned(),
+                serde_json::json!({ "assumptions": params, "counts": counters.stats() }),
+            );
+        }
         println!("{value}");
     } else {
         print!("{}", text(&report, wall));
+        if let Some((_, counters)) = &shield {
+            let c = counters.stats();
+            println!(
+                "  shield       {} of {} go decisions vetoed: {} crossing, {} ahead, {} behind; \
+                 {} for a car it could not see",
+                c.vetoes, c.go_decisions, c.crossing, c.ahead, c.behind, c.phantom_vetoes
+            );
+        }
         if let Some(risk) = &risk {
             print!("{}", risk_text(risk, args.seed));
         }

@@ -9,8 +9,8 @@ use std::sync::Arc;
 
 use anyhow::{Context, anyhow, bail, ensure};
 use crossroads_sim::{
-    Color, Control, Env, EnvConfig, PolicyRng, RenderView, Scene, SceneOptions, Shape,
-    episode_seed, palette, policy_seed,
+    Color, Control, Env, EnvConfig, Layer, PolicyRng, RenderView, Scene, SceneOptions, Shape,
+    check_go, episode_seed, palette, policy_seed, sense,
 };
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -123,7 +123,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<ExitCode> {
 /// Plays trial `args.trial` of seed `args.seed` (the same episode as
 /// `crossroads eval` plays) and records a scene after every step.
 fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
-    let (scenario, policy) = super::eval::load(&args.run)?;
+    let super::eval::Loaded {
+        scenario,
+        policy,
+        shield,
+    } = super::eval::load(&args.run)?;
     let config = EnvConfig::for_actions(args.run.actions);
     let options = SceneOptions {
         grid: args.grid.then_some(config.observation),
@@ -142,9 +146,29 @@ fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
 
     let mut scenes = vec![Scene::of(&env, &view, &options)];
     let mut go_at = None;
+    let mut sensed = Vec::new();
+    let mut vetoes = 0;
     while !env.is_done() {
         let mut action = [0];
+        let before = shield.as_ref().map(|(_, c)| c.stats().vetoes);
         policy.act(std::slice::from_ref(&env), &mut rng, &mut action)?;
+        // Before the ego commits, draw what the shield assumed, and the car
+        // it feared when it vetoed this decision.
+        if let (Some((params, counters)), Some(before)) = (&shield, before)
+            && !env.ego().committed
+        {
+            sense(&env, params, &mut sensed);
+            let vetoed = counters.stats().vetoes > before;
+            let threat = if vetoed {
+                vetoes += 1;
+                check_go(&env, &sensed, params)
+            } else {
+                None
+            };
+            if let Some(scene) = scenes.last_mut() {
+                scene.mark_shield(&env, &view, &sensed, threat.as_ref());
+            }
+        }
         if go_at.is_none() && args.run.actions.decode(action[0])? == Control::Go {
             go_at = Some(scenes.len() - 1);
         }
@@ -154,12 +178,15 @@ fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
     let outcome = env
         .outcome()
         .map_or_else(|| "running".to_owned(), |o| format!("{o:?}").to_lowercase());
-    let summary = format!(
+    let mut summary = format!(
         "{} {outcome} after {:.1} s (traffic braking {:.1} s)",
         policy.name(),
         m.time_s,
         m.brake_time_s
     );
+    if shield.is_some() {
+        summary += &format!(", the shield vetoed {vetoes} go decision(s)");
+    }
     Ok(Episode {
         scenes,
         go_at,
@@ -253,6 +280,20 @@ fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, scene: &Scene) -> any
         ("obstacle", palette::OBSTACLE),
         ("braking", palette::BRAKING),
     ];
+    // The shield's colours only where it drew something.
+    let shield = [
+        ("phantom", palette::PHANTOM, Layer::Phantom),
+        ("vetoed for", palette::THREAT, Layer::Threat),
+    ];
+    let legend: Vec<_> = legend
+        .into_iter()
+        .chain(
+            shield
+                .into_iter()
+                .filter(|(_, _, layer)| scene.count(*layer) > 0)
+                .map(|(label, color, _)| (label, color)),
+        )
+        .collect();
     // Right-aligned along the bottom edge: swatch, gap, label, gap.
     let width = |label: &str| {
         area.estimate_text_size(label, &text)

@@ -3,10 +3,12 @@
 
 mod never;
 mod random;
+mod shielded;
 mod ttc;
 
 pub use never::NeverPolicy;
 pub use random::RandomPolicy;
+pub use shielded::{ShieldCounters, ShieldStats, ShieldedPolicy};
 pub use ttc::TtcPolicy;
 
 use rand_xoshiro::Xoshiro256PlusPlus;

@@ -1,0 +1,602 @@
+//! A safety shield: before the ego commits to *go*, it predicts the ego's
+//! drive and the worst plausible motion of every car the ego can sense,
+//! and of a *phantom* car wherever a lane leaves what the ego can see, and
+//! vetoes the *go* when any of them could come too close.
+//!
+//! # What the shield may know
+//!
+//! Only what a car's own sensors and map give it, stated as a sensor
+//! model ([`sense`]): the map (lanes, the ego's route and its conflict
+//! zones, the speed limits), the ego's own state and dynamics, and the
+//! cars of the observation: a car is sensed when its centre lies on the
+//! TTG grid (104 m either side of the junction) in a cell the sensor sees,
+//! with its lane, position and speed (what the grid's occupancy, offset,
+//! heading and speed channels hold). It never reads a car the observation
+//! leaves out, a driver's desired speed, or the random stream, and it never
+//! forks the simulator.
+//!
+//! # What it assumes
+//!
+//! [`ShieldParams`] states it (the defaults were tuned on seed 3 of Left
+//! and `occluded-30`). A sensed car may accelerate (at traffic's
+//! acceleration) up to `speed_factor` times its lane's limit, or keep
+//! going at `slow_factor` of its speed. Every lane that meets the ego's
+//! route also carries a phantom car at `phantom_factor` times the limit
+//! (the limit itself by default) at the first point, walking upstream from
+//! the ego's path, that the ego cannot see: an occluder's shadow, or the
+//! edge of the grid. Phantoms never brake for the ego.
+//!
+//! Where the scenario's drivers react to the ego
+//! ([`crate::ScenarioSpec::traffic_reacts`]; the occlusion family's do
+//! not), the shield counts on what every driver does and on nothing more:
+//! a sensed driver on a lane the ego crosses gives way when he can hold
+//! back until the ego has crossed braking at most `yield_decel` after
+//! `reaction_s`; a driver coming up a lane the ego turns into brakes at
+//! `follower_decel` from `reaction_s` after *go* to follow it, but may
+//! also brake as hard as a car can (`hard_decel`), so the ego must be safe
+//! whether he passes or stops. Where drivers do not react, a follower only
+//! brakes once the ego is a car length into his lane (the simulator's
+//! drivers follow any leader from then on) and `reaction_s` has passed.
+//! Nobody is counted on to brake harder than `follower_decel` for the ego.
+//!
+//! # The check
+//!
+//! [`check_go`] rolls the ego forward under *go* (full acceleration along
+//! the route's speed caps, the simulator's own ego dynamics) step by step
+//! to the goal. While the ego's front is inside a lane's conflict zone its
+//! footprint, projected onto the lane, must stay `gap_m` clear of every
+//! car's predicted extent: on a crossed lane the band between the car's
+//! slowest and fastest prediction, each widened by `margin_s` of its
+//! speed; on a lane the ego merges into, a car must be clearly ahead (its
+//! slowest rear beyond the ego) or clearly behind (its fastest front short
+//! of the ego) when the ego enters, and stay so, a follower braking as
+//! assumed. The first violation is the veto's [`Threat`].
+
+use serde::Serialize;
+
+use crate::env::Env;
+use crate::error::SimError;
+use crate::geometry::OrientedRect;
+use crate::observation::{GridGeometry, ObsKind};
+use crate::scenario::ego_rect;
+
+/// What the shield assumes about the cars it senses and those it cannot.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ShieldParams {
+    /// Fastest a sensed car drives, as a multiple of its lane's speed
+    /// limit: it may accelerate up to it (or keep a higher speed it already
+    /// has).
+    pub speed_factor: f64,
+    /// Speed of a phantom, as a multiple of its lane's speed limit.
+    pub phantom_factor: f64,
+    /// Slowest a sensed car drives, as a fraction of its present speed.
+    pub slow_factor: f64,
+    /// Seconds of a car's speed added either side of its predicted extent
+    /// on a lane the ego crosses.
+    pub margin_s: f64,
+    /// Metres kept between the ego's footprint and a car's extent along a
+    /// lane.
+    pub gap_m: f64,
+    /// Braking, m/s², of a car that follows the ego into its lane.
+    pub follower_decel: f64,
+    /// Seconds before a driver reacts to the ego: a follower brakes this
+    /// long after the ego is a car length into its lane (after *go* where
+    /// drivers react to the ego); a yielding driver starts braking this
+    /// long after *go*.
+    pub reaction_s: f64,
+    /// Where the scenario's drivers react to the ego
+    /// ([`crate::ScenarioSpec::traffic_reacts`]): a sensed car on a crossed
+    /// lane that can stop short of the ego's path braking at most this hard
+    /// (m/s²) after `reaction_s` gives way. 0 trusts no driver to yield.
+    pub yield_decel: f64,
+    /// Hardest braking of a car, m/s²: where drivers react to the ego,
+    /// the slowest a sensed car may drive is braking this hard from
+    /// `reaction_s` after *go* on.
+    pub hard_decel: f64,
+}
+
+impl Default for ShieldParams {
+    fn default() -> Self {
+        Self {
+            speed_factor: 1.05,
+            phantom_factor: 1.0,
+            slow_factor: 0.95,
+            margin_s: 0.2,
+            gap_m: 0.5,
+            follower_decel: 4.5,
+            reaction_s: 0.2,
+            yield_decel: 4.5,
+            hard_decel: 9.0,
+        }
+    }
+}
+
+impl ShieldParams {
+    /// Parses `default` or comma-separated `key=value` overrides of the
+    /// defaults, e.g. `speed_factor=1.1,margin_s=0.3`.
+    pub fn parse(spec: &str) -> Result<Self, SimError> {
+        let err = |problem: String| SimError::PolicySpec {
+            spec: spec.to_owned(),
+            problem,
+        };
+        let mut p = Self::default();
+        if spec.trim().is_empty() || spec == "default" {
+            return Ok(p);
+        }
+        for part in spec.split(',') {
+            let (key, value) = part
+                .split_once('=')
+                .ok_or_else(|| err(format!("{part:?} is not key=value")))?;
+            let v: f64 = value
+                .trim()
+                .parse()
+                .map_err(|_| err(format!("{key}: {value:?} is not a number")))?;
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(err(format!("{key} must be finite and not negative")));
+            }
+            let field = match key.trim() {
+                "speed_factor" => &mut p.speed_factor,
+                "phantom_factor" => &mut p.phantom_factor,
+                "slow_factor" => &mut p.slow_factor,
+                "margin_s" => &mut p.margin_s,
+                "gap_m" => &mut p.gap_m,
+                "follower_decel" => &mut p.follower_decel,
+                "reaction_s" => &mut p.reaction_s,
+                "yield_decel" => &mut p.yield_decel,
+                "hard_decel" => &mut p.hard_decel,
+                other => {
+                    return Err(err(format!(
+                        "unknown key {other:?}; known: speed_factor, phantom_factor, slow_factor, \
+                         margin_s, gap_m, follower_decel, reaction_s, yield_decel, hard_decel"
+                    )));
+                }
+            };
+            *field = v;
+        }
+        if p.speed_factor <= 0.0
+            || p.phantom_factor <= 0.0
+            || p.slow_factor > 1.0
+            || p.follower_decel <= 0.0
+        {
+            return Err(err(
+                "speed_factor, phantom_factor and follower_decel must be positive, \
+                 slow_factor at most 1"
+                    .into(),
+            ));
+        }
+        Ok(p)
+    }
+}
+
+/// A car as the shield sees it: sensed, or a phantom where the view ends.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SensedCar {
+    /// Index of its lane in [`crate::Scenario::lanes`].
+    pub lane: usize,
+    /// Lane coordinate of its front bumper, m.
+    pub s: f64,
+    /// Speed, m/s.
+    pub v: f64,
+    /// A car the shield assumes where it cannot see, not one it sensed.
+    pub phantom: bool,
+}
+
+/// How a car could come too close to the ego.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ThreatKind {
+    /// On a lane the ego crosses, inside its passage.
+    Crossing,
+    /// Ahead of the ego in the lane it turns into, too slow or too close.
+    Ahead,
+    /// Behind the ego in the lane it turns into, too fast or too close.
+    Behind,
+}
+
+impl ThreatKind {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Crossing => "crossing",
+            Self::Ahead => "ahead",
+            Self::Behind => "behind",
+        }
+    }
+}
+
+/// Why a *go* was vetoed: the first car that could come too close.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Threat {
+    /// The car.
+    pub car: SensedCar,
+    /// How.
+    pub kind: ThreatKind,
+    /// Seconds after *go* at which the ego and the car could meet.
+    pub after_s: f64,
+}
+
+/// The sensor model: the cars of `env`'s TTG-grid observation (centre on
+/// the grid, in a cell the sensor sees) on lanes that meet the ego's
+/// route, then one phantom per such lane where the view upstream of the
+/// ego's path ends. Appends to `out` (cleared first).
+pub fn sense(env: &Env, params: &ShieldParams, out: &mut Vec<SensedCar>) {
+    out.clear();
+    let sc = env.scenario();
+    let grid = GridGeometry::of(env, ObsKind::Ttg);
+    let (_, cols) = grid.shape();
+    let occluded = !env.occluders().is_empty();
+    // Visibility of the cells looked at so far (0 unknown, 1 seen, 2 hidden).
+    let mut seen = [0u8; crate::observation::TTG_ROWS * crate::observation::TTG_COLS];
+    let mut visible = |p| -> bool {
+        let Some((r, c)) = grid.cell(p) else {
+            return false;
+        };
+        if !occluded {
+            return true;
+        }
+        let slot = &mut seen[r * cols + c];
+        if *slot == 0 {
+            *slot = if env.is_visible(grid.center(r, c)) {
+                1
+            } else {
+                2
+            };
+        }
+        *slot == 1
+    };
+    for car in env.traffic().cars() {
+        if sc.lanes()[car.lane].zone.is_some() && visible(car.pos) {
+            out.push(SensedCar {
+                lane: car.lane,
+                s: car.s,
+                v: car.v,
+                phantom: false,
+            });
+        }
+    }
+    let half = 0.5 * sc.spec().traffic.length;
+    for (i, lane) in sc.lanes().iter().enumerate() {
+        let Some(z) = lane.zone else { continue };
+        // Walk upstream from where the ego meets the lane, a metre at a
+        // time, to the first point the ego cannot see; the lane's start
+        // (where cars appear) if it sees all of it.
+        let mut l = z.lane_in;
+        while l > 0.0 && visible(lane.path.pose_at(l).pos) {
+            l -= 1.0;
+        }
+        out.push(SensedCar {
+            lane: i,
+            s: l.max(0.0) + half,
+            v: lane.speed_limit * params.phantom_factor,
+            phantom: true,
+        });
+    }
+}
+
+/// The ego's state at one step of its predicted drive.
+#[derive(Debug, Clone, Copy)]
+struct EgoStep {
+    s: f64,
+    v: f64,
+    rect: OrientedRect,
+}
+
+/// Whether *go* now is safe against `cars` ([`sense`]) under `params`:
+/// `None` when it is, else the first threat found.
+pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<Threat> {
+    let sc = env.scenario();
+    let spec = sc.spec();
+    let (dt, ep, tp) = (sc.dt(), &spec.ego.params, &spec.traffic);
+    // The ego's drive under go, exactly as the simulator moves it.
+    let ego = env.ego();
+    let (mut s, mut v) = (ego.s, ego.v);
+    let mut drive = Vec::with_capacity(64);
+    while s < spec.ego.goal_s && drive.len() < spec.step_limit as usize {
+        v = (v + ep.accel * dt).min(sc.ego_speed_cap(s));
+        s += v * dt;
+        drive.push(EgoStep {
+            s,
+            v,
+            rect: ego_rect(sc.ego_path(), ep, s),
+        });
+    }
+    let reacts = spec.traffic_reacts;
+    cars.iter().find_map(|car| {
+        let lane = &sc.lanes()[car.lane];
+        let z = lane.zone?;
+        let extent = |rect: &OrientedRect| {
+            rect.corners()
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &c| {
+                    let x = lane.coordinate(c);
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        // A driver who sees the ego coming and can hold back until it has
+        // crossed, braking at most `yield_decel`, gives way.
+        if reacts && !z.merge && params.yield_decel > 0.0 {
+            let exit = drive.iter().take_while(|e| e.s <= z.ego_out).count();
+            let t = exit as f64 * dt + params.margin_s;
+            let tau = (t - params.reaction_s).max(0.0);
+            let b = params.yield_decel;
+            let braking = if tau * b >= car.v {
+                car.v * car.v / (2.0 * b)
+            } else {
+                car.v * tau - 0.5 * b * tau * tau
+            };
+            let reach = car.s + car.v * t.min(params.reaction_s) + braking;
+            if reach <= z.lane_in - params.gap_m {
+                return None;
+            }
+        }
+        let v_max = if car.phantom {
+            car.v
+        } else {
+            (lane.speed_limit * params.speed_factor).max(car.v)
+        };
+        // The slowest prediction: a phantom keeps its speed; a driver who
+        // reacts to the ego and is still short of the lane it turns into
+        // may brake as hard as a car can once he has seen it go (the
+        // simulator's drivers brake up to their emergency braking for an
+        // ego about to merge ahead of them); any other keeps `slow_factor`
+        // of his speed.
+        let hard = reacts && z.merge && !car.phantom && car.s < z.lane_in;
+        let mut v_slow = if car.phantom || hard {
+            car.v
+        } else {
+            car.v * params.slow_factor
+        };
+        let (mut x_fast, mut v_fast, mut x_slow) = (car.s, car.v, car.s);
+        // For a lane the ego turns into: whether the car is behind the ego
+        // (true) or ahead (false), decided when the ego enters.
+        let mut behind: Option<bool> = None;
+        // A follower brakes once he has seen the ego go, where drivers
+        // react to it; else once it is a car length into his lane.
+        let mut brake_from = if reacts && z.merge {
+            params.reaction_s
+        } else {
+            f64::INFINITY
+        };
+        for (k, e) in drive.iter().enumerate() {
+            let t = (k + 1) as f64 * dt;
+            v_fast = if z.merge && behind != Some(false) && t >= brake_from {
+                if v_fast > e.v {
+                    (v_fast - params.follower_decel * dt).max(e.v)
+                } else {
+                    v_fast
+                }
+            } else {
+                (v_fast + tp.accel * dt).min(v_max)
+            };
+            x_fast += v_fast * dt;
+            if hard && t > params.reaction_s {
+                v_slow = (v_slow - params.hard_decel * dt).max(0.0);
+            }
+            x_slow += v_slow * dt;
+            if e.s < z.ego_in || e.s > z.ego_out {
+                continue;
+            }
+            let (lo, hi) = extent(&e.rect);
+            let threat = |kind| {
+                Some(Threat {
+                    car: *car,
+                    kind,
+                    after_s: t,
+                })
+            };
+            if !z.merge {
+                let front = x_fast + v_fast * params.margin_s;
+                let rear = x_slow - tp.length - v_slow * params.margin_s;
+                if front > lo - params.gap_m && rear < hi + params.gap_m {
+                    return threat(ThreatKind::Crossing);
+                }
+                continue;
+            }
+            let is_behind = *behind.get_or_insert(x_fast <= lo - params.gap_m);
+            if is_behind {
+                if x_fast > lo - params.gap_m {
+                    return threat(ThreatKind::Behind);
+                }
+                if brake_from.is_infinite() && e.s >= z.ego_in + ep.length {
+                    brake_from = t + params.reaction_s;
+                }
+            } else if x_slow - tp.length < hi + params.gap_m {
+                return threat(ThreatKind::Ahead);
+            }
+        }
+        None
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::action::ActionSet;
+    use crate::env::EnvConfig;
+    use crate::geometry::Vec2;
+    use crate::scenario::Scenario;
+
+    /// `scenario` with no traffic, the ego stopped at its stop line.
+    fn empty(scenario: &str) -> Env {
+        let sc = Arc::new(Scenario::builtin(scenario).unwrap());
+        let mut env = Env::new(Arc::clone(&sc), EnvConfig::for_actions(ActionSet::Ttg));
+        env.clear_traffic();
+        env.set_occluders(&[]);
+        env.set_ego(sc.spec().ego.stop_line_s, 0.0, false);
+        env
+    }
+
+    fn verdict(env: &Env) -> (Vec<SensedCar>, Option<Threat>) {
+        let p = ShieldParams::default();
+        let mut cars = Vec::new();
+        sense(env, &p, &mut cars);
+        let threat = check_go(env, &cars, &p);
+        (cars, threat)
+    }
+
+    /// Lane coordinate where `lane` meets the ego's route.
+    fn lane_in(env: &Env, lane: usize) -> f64 {
+        env.scenario().lanes()[lane].zone.unwrap().lane_in
+    }
+
+    #[test]
+    fn an_empty_road_is_safe_and_every_lane_has_a_phantom_at_the_grid_edge() {
+        for scenario in ["left", "right", "forward", "left2", "challenge"] {
+            let env = empty(scenario);
+            let (cars, threat) = verdict(&env);
+            assert_eq!(threat, None, "{scenario}");
+            let lanes = env.scenario().lanes();
+            let crossed = lanes.iter().filter(|l| l.zone.is_some()).count();
+            assert_eq!(cars.len(), crossed, "{scenario}: one phantom per lane");
+            for c in &cars {
+                assert!(c.phantom);
+                // The grid ends 104 m from the centre; a phantom's centre
+                // is just past it.
+                let centre = lanes[c.lane].path.pose_at(c.s - 2.5).pos;
+                assert!(
+                    (centre.x.abs() - 104.0).abs() < 1.5,
+                    "{scenario}: {centre:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_car_close_on_the_near_lane_is_vetoed_and_a_far_one_is_not() {
+        let mut env = empty("left");
+        let near = lane_in(&env, 0);
+        env.place_car(0, near - 25.0, 15.0).unwrap();
+        let (cars, threat) = verdict(&env);
+        let threat = threat.expect("a car 25 m out at 15 m/s must veto");
+        assert!(!threat.car.phantom);
+        assert_eq!(threat.car.lane, 0);
+        assert!(cars.iter().any(|c| !c.phantom && c.lane == 0));
+
+        // 90 m out at the limit it arrives after the ego has crossed.
+        let mut env = empty("left");
+        env.place_car(0, near - 90.0, 20.0).unwrap();
+        assert_eq!(verdict(&env).1, None);
+    }
+
+    #[test]
+    fn a_car_that_has_passed_is_no_threat_but_one_in_the_zone_is() {
+        let mut env = empty("forward");
+        let z = env.scenario().lanes()[0].zone.unwrap();
+        env.place_car(0, z.lane_out + 10.0, 15.0).unwrap();
+        assert_eq!(verdict(&env).1, None, "gone past the ego's path");
+        let mut env = empty("forward");
+        env.place_car(0, z.lane_in + 1.0, 0.0).unwrap();
+        assert!(verdict(&env).1.is_some(), "standing in the ego's path");
+    }
+
+    #[test]
+    fn merging_in_front_of_a_fast_close_car_is_vetoed() {
+        // Right: the ego turns into the near lane, in front of cars from
+        // the west.
+        let mut env = empty("right");
+        let lane = (0..env.scenario().lanes().len())
+            .find(|&i| env.scenario().lanes()[i].zone.is_some_and(|z| z.merge))
+            .expect("right merges");
+        let entry = lane_in(&env, lane);
+        env.place_car(lane, entry - 20.0, 20.0).unwrap();
+        let threat = verdict(&env).1.expect("20 m behind at 20 m/s");
+        assert_eq!(threat.car.lane, lane);
+        assert!(!threat.car.phantom);
+    }
+
+    #[test]
+    fn an_occluder_hides_a_car_and_its_phantom_vetoes_where_the_open_road_does_not() {
+        let mut env = empty("left");
+        let near = lane_in(&env, 0);
+        // A wall along the near lane's south side, from 3 m to 60 m west of
+        // the centre: the ego at the stop line sees almost nothing of
+        // the near lane upstream.
+        let wall = OrientedRect::new(Vec2::new(-31.5, -4.0), 0.0, 57.0, 1.0);
+        env.set_occluders(&[wall]);
+        env.set_ego(env.scenario().spec().ego.stop_line_s, 0.0, false);
+        // A car behind the wall, 80 m out: too far to be a threat itself,
+        // and not sensed.
+        env.place_car(0, near - 80.0, 15.0).unwrap();
+        let (cars, threat) = verdict(&env);
+        assert!(
+            cars.iter().all(|c| c.phantom),
+            "the hidden car is not sensed"
+        );
+        let threat = threat.expect("a phantom at the wall's end vetoes");
+        assert!(threat.car.phantom);
+        assert_eq!(threat.car.lane, 0);
+        assert!(
+            threat.car.s > near - 20.0,
+            "the shadow starts close: {}",
+            threat.car.s
+        );
+
+        // Without the wall the same car is seen, far enough away: go.
+        let mut env = empty("left");
+        env.place_car(0, near - 80.0, 15.0).unwrap();
+        let (cars, threat) = verdict(&env);
+        assert!(cars.iter().any(|c| !c.phantom));
+        assert_eq!(threat, None);
+    }
+
+    #[test]
+    fn a_driver_who_can_give_way_is_trusted_only_where_drivers_react() {
+        // 45 m out at 20 m/s: he can hold back for the ego braking under
+        // 4.5 m/s², but would reach its path first if he drove on.
+        for (scenario, reacts) in [("left", true), ("occluded", false)] {
+            let mut env = empty(scenario);
+            assert_eq!(env.scenario().spec().traffic_reacts, reacts);
+            let near = lane_in(&env, 0);
+            env.place_car(0, near - 45.0, 20.0).unwrap();
+            let threat = verdict(&env).1;
+            assert_eq!(threat.is_none(), reacts, "{scenario}: {threat:?}");
+        }
+    }
+
+    #[test]
+    fn a_car_that_may_pass_or_brake_hard_before_the_turn_vetoes() {
+        // Left turns into the far lane in front of a car 26 m short of it
+        // at 24 m/s: he would be past by the time the ego gets there, but
+        // the simulator's drivers may brake hard for an ego about to merge
+        // ahead of them and then meet it.
+        let mut env = empty("left");
+        let far = lane_in(&env, 1);
+        env.place_car(1, far - 26.0, 24.0).unwrap();
+        let threat = verdict(&env)
+            .1
+            .expect("passing or braking, he meets the ego");
+        assert_eq!(threat.car.lane, 1);
+        assert_eq!(threat.kind, ThreatKind::Ahead);
+        // Long past the turn he is no threat.
+        let mut env = empty("left");
+        env.place_car(1, far + 40.0, 20.0).unwrap();
+        assert_eq!(verdict(&env).1, None);
+    }
+
+    #[test]
+    fn parses_overrides_and_names_bad_ones() {
+        let p = ShieldParams::parse("speed_factor=1.1, margin_s=0.3").unwrap();
+        assert_eq!(p.speed_factor, 1.1);
+        assert_eq!(p.margin_s, 0.3);
+        assert_eq!(p.gap_m, ShieldParams::default().gap_m);
+        assert_eq!(
+            ShieldParams::parse("default").unwrap(),
+            ShieldParams::default()
+        );
+        for bad in [
+            "speed",
+            "speed_factor=x",
+            "wings=2",
+            "gap_m=-1",
+            "slow_factor=2",
+        ] {
+            let e = ShieldParams::parse(bad).unwrap_err().to_string();
+            assert!(
+                e.contains(bad.split('=').next().unwrap()) || e.contains("slow_factor"),
+                "{e}"
+            );
+        }
+    }
+}
