@@ -269,6 +269,98 @@ fn eval_failures_names_trials_that_render_draws_failing() {
 }
 
 #[test]
+fn eval_shield_stops_a_reckless_policy_colliding_and_counts_its_vetoes() {
+    // ttc:0 goes at once whatever comes; behind the shield it must wait
+    // for a gap the shield accepts.
+    let eval = |extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "--policy",
+            "ttc:0",
+            "--scenario",
+            "left",
+            "--trials",
+            "300",
+            "--seed",
+            "3",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, stdout, stderr) = crossroads(&args);
+        assert!(ok, "{stderr}");
+        serde_json::from_str::<serde_json::Value>(&stdout).expect("json")
+    };
+    let bare = eval(&[]);
+    let shielded = eval(&["--shield"]);
+    assert!(bare["collision_rate"].as_f64().unwrap() > 0.05, "{bare}");
+    assert_eq!(shielded["collision_rate"].as_f64(), Some(0.0), "{shielded}");
+    assert_eq!(shielded["policy"], "ttc:0+shield");
+    let counts = &shielded["shield"]["counts"];
+    let vetoes = counts["vetoes"].as_u64().unwrap();
+    assert!(vetoes > 0, "{counts}");
+    let by_kind: u64 = ["crossing", "ahead", "behind"]
+        .iter()
+        .map(|k| counts[k].as_u64().unwrap())
+        .sum();
+    assert_eq!(by_kind, vetoes, "{counts}");
+    assert_eq!(
+        shielded["shield"]["assumptions"]["gap_m"].as_f64(),
+        Some(0.5)
+    );
+    // Overrides reach the assumptions; bad ones are named.
+    let wider = eval(&["--shield", "gap_m=2"]);
+    assert_eq!(wider["shield"]["assumptions"]["gap_m"].as_f64(), Some(2.0));
+    for (bad, named) in [("wings=2", "wings"), ("gap_m=x", "gap_m")] {
+        let (ok, _, stderr) = crossroads(&[
+            "eval",
+            "--policy",
+            "ttc:0",
+            "--scenario",
+            "left",
+            "--trials",
+            "1",
+            "--shield",
+            bad,
+        ]);
+        assert!(
+            !ok && stderr.contains("--shield") && stderr.contains(named),
+            "{stderr}"
+        );
+    }
+    let (ok, _, stderr) = crossroads(&[
+        "eval",
+        "--policy",
+        "ttc:1",
+        "--actions",
+        "sequential",
+        "--trials",
+        "1",
+        "--shield",
+    ]);
+    assert!(!ok && stderr.contains("ttg or creep"), "{stderr}");
+
+    // render draws the phantoms and names a veto in its summary.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let png = dir.path().join("shield.png");
+    let (ok, drawn, stderr) = crossroads(&[
+        "render",
+        "--policy",
+        "ttc:0",
+        "--scenario",
+        "left",
+        "--seed",
+        "3",
+        "--trial",
+        "0",
+        "--shield",
+        "--out",
+        png.to_str().expect("utf-8 path"),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(drawn.contains("the shield vetoed"), "{drawn}");
+}
+
+#[test]
 fn tune_ttc_writes_csv_and_png() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().to_str().expect("utf-8");
