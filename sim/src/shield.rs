@@ -24,7 +24,9 @@
 //! route also carries a phantom car at `phantom_factor` times the limit
 //! (the limit itself by default) at the first point, walking upstream from
 //! the ego's path, that the ego cannot see: an occluder's shadow, or the
-//! edge of the grid. Phantoms never brake for the ego.
+//! edge of the grid. A phantom never brakes for its own reasons; where
+//! drivers react to the ego it gives way by the same rule as a sensed
+//! driver (below), where they do not it drives on.
 //!
 //! Where the scenario's drivers react to the ego
 //! ([`crate::ScenarioSpec::traffic_reacts`]; the occlusion family's do

@@ -77,11 +77,6 @@ impl ShieldedPolicy {
         Arc::clone(&self.counters)
     }
 
-    /// The assumptions.
-    pub fn params(&self) -> &ShieldParams {
-        &self.params
-    }
-
     /// What the shield says about *go* in `env` now: `None` when it lets
     /// it pass. The sensed cars and phantoms are left in `cars`.
     pub fn check(&self, env: &Env, cars: &mut Vec<SensedCar>) -> Option<Threat> {
