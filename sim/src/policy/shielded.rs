@@ -186,7 +186,7 @@ mod tests {
         env.clear_traffic();
         env.set_ego(sc.spec().ego.stop_line_s, 0.0, false);
         let z = sc.lanes()[0].zone.unwrap();
-        env.place_car(0, z.lane_in - 20.0, 15.0).unwrap();
+        env.place_car(0, z.lane_in - 12.0, 15.0).unwrap();
         // TTC with a zero threshold goes whenever no car is in the zone.
         let policy = ShieldedPolicy::new(
             Box::new(TtcPolicy::new(0.0, false)),
