@@ -30,6 +30,28 @@ fn cell_trials(cell: &serde_json::Value) -> u64 {
     cell["trials"].as_u64().unwrap_or(0)
 }
 
+/// A cell of a network behind the safety shield: its trials, a policy
+/// name saying so, and veto counts that add up.
+fn assert_shielded(cell: &serde_json::Value, row: &serde_json::Value) {
+    assert_eq!(cell_trials(cell), 300, "{row}");
+    let policy = cell["policy"].as_str().unwrap_or_default();
+    assert!(
+        policy.starts_with("dqn:") && policy.ends_with("+shield"),
+        "{row}"
+    );
+    let counts = &cell["shield"];
+    let (goes, vetoes) = (
+        counts["go_decisions"].as_u64().expect("go decisions"),
+        counts["vetoes"].as_u64().expect("vetoes"),
+    );
+    assert!(vetoes <= goes, "{counts}");
+    let kinds: u64 = ["crossing", "ahead", "behind"]
+        .iter()
+        .map(|k| counts[k].as_u64().expect("kind"))
+        .sum();
+    assert_eq!(kinds, vetoes, "every veto has a kind: {counts}");
+}
+
 #[test]
 fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -66,6 +88,8 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     assert_eq!(t1.len(), 5, "{t1:?}");
     for row in t1 {
         assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
+        // The same weights behind the shield, with its counts.
+        assert_shielded(&row["shielded"], row);
         // TTC's cell is the lowest threshold without collisions.
         assert_eq!(row["ttc"]["collision"].as_f64(), Some(0.0), "{row}");
         assert!(
@@ -79,6 +103,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         for method in ["ttc_creep", "ttg", "creep"] {
             assert_eq!(cell_trials(&row[method]), 300, "{method}: {row}");
         }
+        assert_shielded(&row["shielded"], row);
     }
     let t3 = r["table3"].as_array().expect("table3");
     assert_eq!(t3.len(), 5);
@@ -97,11 +122,19 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     // Paper numbers sit beside ours: Left's DQN-TTG success is 99.99.
     assert!(md.contains("(99.99)"), "{md}");
     assert!(md.contains("![Figure 3](fig3.png)"), "{md}");
+    assert!(md.contains("| DQN-TTG + shield |"), "{md}");
+    assert!(md.contains("| DQN-Creep + shield |"), "{md}");
+    assert!(md.contains("## The DQN behind the safety shield"), "{md}");
     let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
     assert!(
         csv.lines()
             .any(|l| l.starts_with("left,dqn-ttg,success_%,") && l.ends_with(",99.99")),
         "{csv}"
+    );
+    assert!(
+        csv.lines()
+            .any(|l| l.starts_with("left,dqn-ttg+shield,success_%,") && l.ends_with(',')),
+        "the shield's cells have no paper value: {csv}"
     );
     let training = std::fs::read_to_string(out.join("training.csv")).expect("csv");
     assert_eq!(training.lines().count(), 8, "{training}");

@@ -21,8 +21,8 @@ use std::time::Duration;
 use anyhow::Context;
 use crossroads_common::Shutdown;
 use crossroads_sim::{
-    ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Scenario, SweepPoint, TuneReport,
-    default_thresholds, evaluate, tune_ttc,
+    ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Policy, Scenario, ShieldParams, ShieldStats,
+    ShieldedPolicy, SweepPoint, TuneReport, default_thresholds, evaluate, tune_ttc,
 };
 use serde::Serialize;
 
@@ -197,6 +197,9 @@ pub struct Cell {
     pub time: Option<f64>,
     /// Mean brake-light time of traffic per trial by SUMO's rule, s.
     pub brake: f64,
+    /// What the safety shield did, for a policy behind it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shield: Option<ShieldStats>,
 }
 
 impl Cell {
@@ -209,6 +212,7 @@ impl Cell {
             timeout: 100.0 * r.timeout_rate,
             time: r.mean_time_s,
             brake: r.mean_brake_light_s,
+            shield: None,
         }
     }
 
@@ -221,12 +225,13 @@ impl Cell {
             timeout: 100.0 * p.timeout_rate,
             time: p.mean_time_s,
             brake: p.mean_brake_light_s,
+            shield: None,
         }
     }
 }
 
 /// Table I, one scenario: TTC (with its threshold), DQN-Sequential,
-/// DQN-TTG.
+/// DQN-TTG, and DQN-TTG behind the safety shield (not in the paper).
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Row1 {
     pub scenario: String,
@@ -234,6 +239,7 @@ pub struct Row1 {
     pub ttc: Option<Cell>,
     pub sequential: Option<Cell>,
     pub ttg: Option<Cell>,
+    pub shielded: Option<Cell>,
 }
 
 /// Table II, one occluder length.
@@ -245,6 +251,8 @@ pub struct Row2 {
     pub ttg: Option<Cell>,
     pub creep: Option<Cell>,
     pub sequential: Option<Cell>,
+    /// DQN-Creep behind the safety shield (not in the paper).
+    pub shielded: Option<Cell>,
 }
 
 /// One training run and what it cost.
@@ -452,15 +460,24 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
         }
     }
 
-    let dqn =
-        |experiment: &str, scenario: &str, actions: ActionSet| -> anyhow::Result<Option<Cell>> {
-            stop()?;
-            let dir = plan.run_dir(experiment);
-            if !plan.dqn || !dir.exists() {
-                return Ok(None);
-            }
-            evaluate_network(plan, &dir, scenario, actions)
-        };
+    let eval_run = |experiment: &str,
+                    scenario: &str,
+                    actions: ActionSet,
+                    shield: bool|
+     -> anyhow::Result<Option<Cell>> {
+        stop()?;
+        let dir = plan.run_dir(experiment);
+        if !plan.dqn || !dir.exists() {
+            return Ok(None);
+        }
+        evaluate_network(plan, &dir, scenario, actions, shield)
+    };
+    let dqn = |experiment: &str, scenario: &str, actions: ActionSet| {
+        eval_run(experiment, scenario, actions, false)
+    };
+    let shielded = |experiment: &str, scenario: &str, actions: ActionSet| {
+        eval_run(experiment, scenario, actions, true)
+    };
     // Table I's rows; Figure 3 plots the same cells.
     for &s in open_scenarios(plan) {
         {
@@ -475,6 +492,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                     None
                 },
                 ttg: dqn(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
+                shielded: shielded(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
             });
         }
     }
@@ -493,6 +511,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                 } else {
                     None
                 },
+                shielded: shielded("creep-occluded", &s, ActionSet::Creep)?,
             });
         }
     }
@@ -570,7 +589,8 @@ fn sweep(
     Ok(report)
 }
 
-/// The best weights of the run in `dir` on `scenario`; `None` when the
+/// The best weights of the run in `dir` on `scenario`, behind the safety
+/// shield (its default assumptions) when `shield`; `None` when the
 /// network cannot read that scenario's observations (transfer across
 /// different grids).
 fn evaluate_network(
@@ -578,28 +598,40 @@ fn evaluate_network(
     dir: &Path,
     scenario: &str,
     actions: ActionSet,
+    shield: bool,
 ) -> anyhow::Result<Option<Cell>> {
     let best = dir.join("best");
-    let policy = NetworkPolicy::load(&best)?
+    let network = NetworkPolicy::load(&best)?
         .with_context(|| format!("{} holds no weights", best.display()))?;
     let sc = Arc::new(Scenario::load(scenario).with_context(|| format!("scenario {scenario}"))?);
-    if let Err(e) = policy.fits(&Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions))) {
+    if let Err(e) = network.fits(&Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions))) {
         eprintln!("  {} on {scenario}: skipped, {e:#}", dir.display());
         return Ok(None);
     }
+    let (policy, counters): (Box<dyn Policy>, _) = if shield {
+        let shielded = ShieldedPolicy::new(Box::new(network), ShieldParams::default());
+        let counters = shielded.counters();
+        (Box::new(shielded), Some(counters))
+    } else {
+        (Box::new(network), None)
+    };
     let bar = progress::bar(plan.trials, "trials");
     let name = dir
         .file_name()
-        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        + if shield { " + shield" } else { "" };
     bar.set_message(format!("{name} on {scenario}"));
     let report = evaluate(
         &sc,
-        &policy,
+        policy.as_ref(),
         &EvalConfig::new(actions, plan.trials, plan.seed),
         &|n| bar.inc(n),
     )?;
     bar.finish_and_clear();
-    let cell = Cell::of_report(&report);
+    let cell = Cell {
+        shield: counters.map(|c| c.stats()),
+        ..Cell::of_report(&report)
+    };
     eprintln!(
         "  {name} on {scenario}: {:.2} % success, {:.2} % collisions, {}",
         cell.success,

@@ -102,23 +102,24 @@ fn paper2(p: &paper::Row2) -> [f64; 3] {
     [p.success, p.collision, p.time]
 }
 
-/// One CSV line per metric of `cell` (as many as the paper gives):
-/// `key,method,metric,ours,paper`.
+/// One CSV line per metric of `cell` (as many as the table has):
+/// `key,method,metric,ours,paper` (paper empty for a method it lacks).
 fn csv_cells(
     out: &mut String,
     key: &dyn std::fmt::Display,
     method: &str,
     cell: Option<&Cell>,
-    theirs: &[f64],
+    theirs: &[Option<f64>],
 ) {
     let ours = metrics(cell);
+    let text = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
     for (k, (metric, _)) in METRICS1.iter().take(theirs.len()).enumerate() {
         let _ = writeln!(
             out,
             "{key},{method},{},{},{}",
             metric.replace(' ', "_"),
-            ours[k].map_or(String::new(), |v| v.to_string()),
-            theirs[k]
+            text(ours[k]),
+            text(theirs[k])
         );
     }
 }
@@ -135,9 +136,16 @@ fn table1_csv(r: &Results) -> String {
             ("dqn-ttg", row.ttg.as_ref()),
         ];
         for (m, (name, cell)) in methods.iter().enumerate() {
-            let theirs = paper1(&paper::TABLE1[i][m]);
+            let theirs = paper1(&paper::TABLE1[i][m]).map(Some);
             csv_cells(&mut out, &row.scenario, name, *cell, &theirs);
         }
+        csv_cells(
+            &mut out,
+            &row.scenario,
+            "dqn-ttg+shield",
+            row.shielded.as_ref(),
+            &[None; 4],
+        );
     }
     out
 }
@@ -152,9 +160,16 @@ fn table2_csv(r: &Results) -> String {
             ("dqn-sequential", row.sequential.as_ref()),
         ];
         for (m, (name, cell)) in methods.iter().enumerate() {
-            let theirs = paper2(&paper::TABLE2[i][m]);
+            let theirs = paper2(&paper::TABLE2[i][m]).map(Some);
             csv_cells(&mut out, &row.length_m, name, *cell, &theirs);
         }
+        csv_cells(
+            &mut out,
+            &row.length_m,
+            "dqn-creep+shield",
+            row.shielded.as_ref(),
+            &[None; 3],
+        );
     }
     out
 }
@@ -259,23 +274,29 @@ fn markdown(plan: &Plan, r: &Results) -> String {
         );
     }
     shortfalls_md(w, r);
+    shield_md(w, r);
     training_md(w, r);
     md
 }
 
 /// The Markdown lines of one table row: a line per metric the paper
-/// gives, `ours (paper)` per method; `label` on the first line.
+/// gives, `ours (paper)` per method, then ours alone for the methods the
+/// paper does not have (`extra`); `label` on the first line.
 fn md_rows<const N: usize>(
     w: &mut String,
     label: &str,
     cells: &[[Option<f64>; 4]],
     theirs: &[[f64; N]],
+    extra: &[[Option<f64>; 4]],
 ) {
     for (k, (metric, d)) in METRICS1.iter().take(N).enumerate() {
         let name = if k == 0 { label } else { "" };
         let _ = write!(w, "| {name} | {metric} |");
         for (ours, paper) in cells.iter().zip(theirs) {
             let _ = write!(w, " {} |", pair(ours[k], paper[k], *d));
+        }
+        for ours in extra {
+            let _ = write!(w, " {} |", num(ours[k], *d));
         }
         w.push('\n');
     }
@@ -285,8 +306,8 @@ fn table1_md(w: &mut String, r: &Results) {
     let _ = writeln!(
         w,
         "## Table I: no occlusion\n\n\
-         | scenario | metric | TTC | DQN-Sequential | DQN-TTG |\n\
-         | --- | --- | --- | --- | --- |"
+         | scenario | metric | TTC | DQN-Sequential | DQN-TTG | DQN-TTG + shield |\n\
+         | --- | --- | --- | --- | --- | --- |"
     );
     for row in &r.table1 {
         let Some(i) = SCENARIOS.iter().position(|s| *s == row.scenario) else {
@@ -298,7 +319,8 @@ fn table1_md(w: &mut String, r: &Results) {
             metrics(row.ttg.as_ref()),
         ];
         let theirs = paper::TABLE1[i].map(|p| paper1(&p));
-        md_rows(w, &title(&row.scenario), &cells, &theirs);
+        let extra = [metrics(row.shielded.as_ref())];
+        md_rows(w, &title(&row.scenario), &cells, &theirs, &extra);
     }
     let thresholds: Vec<String> = r
         .table1
@@ -324,8 +346,8 @@ fn table2_md(w: &mut String, r: &Results) {
     let _ = writeln!(
         w,
         "## Table II: occlusion (left turn across two lanes, traffic does not brake)\n\n\
-         | occlusion | metric | TTC with creep | DQN-TTG | DQN-Creep | DQN-Sequential |\n\
-         | --- | --- | --- | --- | --- | --- |"
+         | occlusion | metric | TTC with creep | DQN-TTG | DQN-Creep | DQN-Sequential | DQN-Creep + shield |\n\
+         | --- | --- | --- | --- | --- | --- | --- |"
     );
     for (i, row) in r.table2.iter().enumerate() {
         let cells = [
@@ -335,7 +357,8 @@ fn table2_md(w: &mut String, r: &Results) {
             metrics(row.sequential.as_ref()),
         ];
         let theirs = paper::TABLE2[i].map(|p| paper2(&p));
-        md_rows(w, &format!("{} m", row.length_m), &cells, &theirs);
+        let extra = [metrics(row.shielded.as_ref())];
+        md_rows(w, &format!("{} m", row.length_m), &cells, &theirs, &extra);
     }
     let thresholds: Vec<String> = r
         .table2
@@ -463,6 +486,77 @@ fn shortfalls_md(w: &mut String, r: &Results) {
     );
 }
 
+/// The safety shield's targets per row: zero collisions; at least TTC's
+/// success; on Table I a mean time at least 15 % below TTC's and within
+/// 5 % of the unshielded DQN's.
+fn shield_md(w: &mut String, r: &Results) {
+    let rows1 = r.table1.iter().filter_map(|row| {
+        let s = row.shielded.as_ref()?;
+        Some((title(&row.scenario), s, row.ttc.as_ref(), row.ttg.as_ref()))
+    });
+    let rows2 = r.table2.iter().filter_map(|row| {
+        let s = row.shielded.as_ref()?;
+        Some((
+            format!("{} m", row.length_m),
+            s,
+            row.ttc_creep.as_ref(),
+            None,
+        ))
+    });
+    let rows: Vec<_> = rows1.chain(rows2).collect();
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        w,
+        "## The DQN behind the safety shield
+
+         `crossroads eval --policy <run>/best --shield` on the same trials: every *go* the          network chooses is checked against the cars the ego senses and phantom cars where its          view ends, and vetoed when any could come too close (`sim::shield`). Targets: no          collision, at least the TTC column's success; on Table I also a mean time at least          15 % below TTC's and within 5 % of the unshielded DQN's.
+
+         | row | collisions | success vs TTC | time / TTC's | time / DQN's | go vetoed |\n\
+         | --- | --- | --- | --- | --- | --- |"
+    );
+    let mark = |ok: bool| if ok { "✓" } else { "✗" };
+    for (label, s, ttc, dqn) in rows {
+        let ratio = |other: Option<&Cell>| -> Option<f64> { Some(s.time? / other?.time?) };
+        let vs_ttc = ttc.map_or("–".to_owned(), |t| {
+            format!(
+                "{} {:.2} % vs {:.2} %",
+                mark(s.success >= t.success),
+                s.success,
+                t.success
+            )
+        });
+        let time_ttc = match (ratio(ttc), dqn) {
+            (Some(q), Some(_)) => format!("{} {q:.3}", mark(q <= 0.85)),
+            (Some(q), None) => format!("{q:.3}"),
+            (None, _) => "–".to_owned(),
+        };
+        let time_dqn =
+            ratio(dqn).map_or("–".to_owned(), |q| format!("{} {q:.3}", mark(q <= 1.05)));
+        let vetoes = s.shield.map_or("–".to_owned(), |v| {
+            format!(
+                "{} of {} ({:.1} %)",
+                v.vetoes,
+                v.go_decisions,
+                100.0 * v.vetoes as f64 / v.go_decisions.max(1) as f64
+            )
+        });
+        let _ = writeln!(
+            w,
+            "| {label} | {} {:.2} % | {vs_ttc} | {time_ttc} | {time_dqn} | {vetoes} |",
+            mark(s.collision == 0.0),
+            s.collision
+        );
+    }
+    let _ = writeln!(
+        w,
+        "
+On Table II the unshielded comparison is DQN-Creep; the time target applies to          Table I only.
+"
+    );
+}
+
 fn training_md(w: &mut String, r: &Results) {
     if r.runs.is_empty() {
         return;
@@ -537,6 +631,10 @@ fn fig3(path: &Path, r: &Results) -> anyhow::Result<()> {
             (
                 "DQN-Sequential",
                 row.and_then(|row| row.sequential.as_ref()),
+            ),
+            (
+                "DQN-TTG + shield",
+                row.and_then(|row| row.shielded.as_ref()),
             ),
         ] {
             if let Some(c) = cell
