@@ -487,8 +487,8 @@ pub struct PolicyArgs {
     /// actions). Optionally override its assumptions, e.g.
     /// `--shield margin_s=0.3,phantom_factor=1.1` (keys: speed_factor,
     /// phantom_factor, slow_factor, margin_s, gap_m, follower_decel,
-    /// reaction_s, yield_decel, clear_s, hard_decel; `yield_decel=4.5`
-    /// counts on comfortable braking only).
+    /// reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel;
+    /// `yield_decel=4.5` counts on comfortable braking only).
     #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]
     pub shield: Option<String>,
 }
