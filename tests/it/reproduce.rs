@@ -30,13 +30,14 @@ fn cell_trials(cell: &serde_json::Value) -> u64 {
     cell["trials"].as_u64().unwrap_or(0)
 }
 
-/// A cell of a network behind the safety shield: its trials, a policy
-/// name saying so, and veto counts that add up.
-fn assert_shielded(cell: &serde_json::Value, row: &serde_json::Value) {
+/// A cell of a policy (named starting with `inner`) behind the safety
+/// shield: its trials, a policy name saying so, and veto counts that add
+/// up.
+fn assert_shielded(cell: &serde_json::Value, inner: &str, row: &serde_json::Value) {
     assert_eq!(cell_trials(cell), 300, "{row}");
     let policy = cell["policy"].as_str().unwrap_or_default();
     assert!(
-        policy.starts_with("dqn:") && policy.ends_with("+shield"),
+        policy.starts_with(inner) && policy.ends_with("+shield"),
         "{row}"
     );
     let counts = &cell["shield"];
@@ -89,7 +90,9 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     for row in t1 {
         assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
         // The same weights behind the shield, with its counts.
-        assert_shielded(&row["shielded"], row);
+        assert_shielded(&row["shielded"], "dqn:", row);
+        // The shield alone: TTC at 0 s behind it.
+        assert_shielded(&row["shield_alone"], "ttc:0", row);
         // TTC's cell is the lowest threshold without collisions.
         assert_eq!(row["ttc"]["collision"].as_f64(), Some(0.0), "{row}");
         assert!(
@@ -103,7 +106,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         for method in ["ttc_creep", "ttg", "creep"] {
             assert_eq!(cell_trials(&row[method]), 300, "{method}: {row}");
         }
-        assert_shielded(&row["shielded"], row);
+        assert_shielded(&row["shielded"], "dqn:", row);
     }
     let t3 = r["table3"].as_array().expect("table3");
     assert_eq!(t3.len(), 5);
@@ -125,6 +128,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     assert!(md.contains("| DQN-TTG + shield |"), "{md}");
     assert!(md.contains("| DQN-Creep + shield |"), "{md}");
     assert!(md.contains("## The DQN behind the safety shield"), "{md}");
+    assert!(md.contains("| Left, shield alone | "), "{md}");
     let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
     assert!(
         csv.lines()

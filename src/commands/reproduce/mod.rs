@@ -21,8 +21,9 @@ use std::time::Duration;
 use anyhow::Context;
 use crossroads_common::Shutdown;
 use crossroads_sim::{
-    ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Policy, Scenario, ShieldParams, ShieldStats,
-    ShieldedPolicy, SweepPoint, TuneReport, default_thresholds, evaluate, tune_ttc,
+    ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Policy, Scenario, ShieldCounters,
+    ShieldParams, ShieldStats, ShieldedPolicy, SweepPoint, TuneReport, default_thresholds,
+    evaluate, tune_ttc,
 };
 use serde::Serialize;
 
@@ -240,6 +241,9 @@ pub struct Row1 {
     pub sequential: Option<Cell>,
     pub ttg: Option<Cell>,
     pub shielded: Option<Cell>,
+    /// The shield alone: TTC at 0 s behind it, going whenever the shield
+    /// lets it (not in the paper).
+    pub shield_alone: Option<Cell>,
 }
 
 /// Table II, one occluder length.
@@ -493,6 +497,22 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                 },
                 ttg: dqn(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
                 shielded: shielded(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
+                shield_alone: if plan.dqn {
+                    stop()?;
+                    let sc = load_scenario(s)?;
+                    let ttc = crossroads_sim::parse_policy("ttc:0")?;
+                    let (policy, counters) = behind_shield(ttc);
+                    Some(evaluate_policy(
+                        plan,
+                        "ttc:0 + shield",
+                        &sc,
+                        ActionSet::Ttg,
+                        policy.as_ref(),
+                        counters,
+                    )?)
+                } else {
+                    None
+                },
             });
         }
     }
@@ -603,27 +623,52 @@ fn evaluate_network(
     let best = dir.join("best");
     let network = NetworkPolicy::load(&best)?
         .with_context(|| format!("{} holds no weights", best.display()))?;
-    let sc = Arc::new(Scenario::load(scenario).with_context(|| format!("scenario {scenario}"))?);
+    let sc = load_scenario(scenario)?;
     if let Err(e) = network.fits(&Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions))) {
         eprintln!("  {} on {scenario}: skipped, {e:#}", dir.display());
         return Ok(None);
     }
     let (policy, counters): (Box<dyn Policy>, _) = if shield {
-        let shielded = ShieldedPolicy::new(Box::new(network), ShieldParams::default());
-        let counters = shielded.counters();
-        (Box::new(shielded), Some(counters))
+        behind_shield(Box::new(network))
     } else {
         (Box::new(network), None)
     };
-    let bar = progress::bar(plan.trials, "trials");
     let name = dir
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned())
         + if shield { " + shield" } else { "" };
+    evaluate_policy(plan, &name, &sc, actions, policy.as_ref(), counters).map(Some)
+}
+
+fn load_scenario(scenario: &str) -> anyhow::Result<Arc<Scenario>> {
+    Ok(Arc::new(
+        Scenario::load(scenario).with_context(|| format!("scenario {scenario}"))?,
+    ))
+}
+
+/// `policy` behind the safety shield with its default assumptions, and
+/// the shield's counters.
+fn behind_shield(policy: Box<dyn Policy>) -> (Box<dyn Policy>, Option<Arc<ShieldCounters>>) {
+    let shielded = ShieldedPolicy::new(policy, ShieldParams::default());
+    let counters = shielded.counters();
+    (Box::new(shielded), Some(counters))
+}
+
+/// `policy` (called `name` in the log) on `plan.trials` trials of `sc`.
+fn evaluate_policy(
+    plan: &Plan,
+    name: &str,
+    sc: &Arc<Scenario>,
+    actions: ActionSet,
+    policy: &dyn Policy,
+    counters: Option<Arc<ShieldCounters>>,
+) -> anyhow::Result<Cell> {
+    let scenario = sc.name();
+    let bar = progress::bar(plan.trials, "trials");
     bar.set_message(format!("{name} on {scenario}"));
     let report = evaluate(
-        &sc,
-        policy.as_ref(),
+        sc,
+        policy,
         &EvalConfig::new(actions, plan.trials, plan.seed),
         &|n| bar.inc(n),
     )?;
@@ -638,7 +683,7 @@ fn evaluate_network(
         cell.collision,
         cell.time.map_or("-".to_owned(), |t| format!("{t:.2} s"))
     );
-    Ok(Some(cell))
+    Ok(cell)
 }
 
 /// The current time, e.g. `Tue, 24 Nov 2026 04:30:00 GMT`.
