@@ -23,11 +23,14 @@
 //! acceleration) up to `speed_factor` times its lane's limit, or keep
 //! going at `slow_factor` of its speed. Every lane that meets the ego's
 //! route also carries a phantom car at `phantom_factor` times the limit
-//! (the limit itself by default) at the first point, walking upstream from
-//! the ego's path, that the ego cannot see: an occluder's shadow, or the
-//! edge of the grid. A phantom never brakes for its own reasons; where
-//! drivers react to the ego it gives way by the same rule as a sensed
-//! driver (below), where they do not it drives on.
+//! (1.2, as fast as a sensed car may get) at the first point, walking
+//! upstream from the ego's path, that the ego cannot see: an occluder's
+//! shadow, or the edge of the grid. A phantom stands for every car the
+//! unseen stretch may hold: the fastest coming from its edge, the slowest
+//! standing there, so the ego never goes behind one (a car unseen a few
+//! metres behind it would meet the ego). It never brakes for its own
+//! reasons; where drivers react to the ego it gives way by the same rule
+//! as a sensed driver (below), where they do not it drives on.
 //!
 //! Where the scenario's drivers react to the ego
 //! ([`crate::ScenarioSpec::traffic_reacts`]; the occlusion family's do
@@ -81,7 +84,11 @@ pub struct ShieldParams {
     /// stated speed factor (SUMO's `speedDev` 0.1 about 1): a driver at 1.1
     /// times the limit may well still be speeding up.
     pub speed_factor: f64,
-    /// Speed of a phantom, as a multiple of its lane's speed limit.
+    /// Speed of a phantom, as a multiple of its lane's speed limit: a
+    /// hidden driver may be as fast as a sensed one (`speed_factor`). At
+    /// 1.0 a hidden follower at 1.1 times the limit rear-ended an ego that
+    /// turned in ahead of him (`ttc-creep:0` behind the shield, occluded-30
+    /// seed 3 trial 6831).
     pub phantom_factor: f64,
     /// Slowest a sensed car drives, as a fraction of its present speed.
     pub slow_factor: f64,
@@ -134,7 +141,7 @@ impl Default for ShieldParams {
     fn default() -> Self {
         Self {
             speed_factor: 1.2,
-            phantom_factor: 1.0,
+            phantom_factor: 1.2,
             slow_factor: 0.95,
             margin_s: 0.2,
             gap_m: 0.5,
@@ -373,7 +380,8 @@ pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<
         } else {
             (lane.speed_limit * params.speed_factor).max(car.v)
         };
-        // The slowest prediction: a phantom keeps its speed; a driver who
+        // The slowest prediction: a phantom's shadow may hold a car
+        // standing at its edge (it never passes); a driver who
         // reacts to the ego and is still short of the lane it turns into
         // may brake as hard as a car can from the moment it goes (the
         // simulator's drivers brake up to their emergency braking for an
@@ -388,7 +396,9 @@ pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<
             v > 0.1 && (z.lane_clear() + tp.length - car.s) / v + params.clear_s <= enter
         };
         let hard = reacts && z.merge && !car.phantom && car.s < z.lane_in && !clears_first();
-        let mut v_slow = if car.phantom || hard {
+        let mut v_slow = if car.phantom {
+            0.0
+        } else if hard {
             car.v
         } else {
             car.v * params.slow_factor
@@ -675,6 +685,36 @@ mod tests {
         let (cars, threat) = verdict(&env);
         assert!(cars.iter().any(|c| !c.phantom));
         assert_eq!(threat, None);
+    }
+
+    #[test]
+    fn a_shadow_may_hide_a_stream_of_cars_so_the_ego_never_goes_behind_its_phantom() {
+        // Traffic that does not react; a 40 m wall 6 m west of the centre
+        // hides the near lane from 8.5 m short of the ego's path on (seed 3
+        // trial 15 of ttc-creep:0 behind the shield on occluded-30). The
+        // phantom at the shadow's edge passes before the ego gets there,
+        // but the car 10 m behind it, unseen, does not.
+        let mut env = empty("occluded");
+        assert!(!env.scenario().spec().traffic_reacts);
+        let near = lane_in(&env, 0);
+        let wall = OrientedRect::new(Vec2::new(-26.0, -4.0), 0.0, 40.0, 1.0);
+        env.set_occluders(&[wall]);
+        env.set_ego(env.scenario().spec().ego.stop_line_s, 0.0, false);
+        let edge = verdict(&env)
+            .0
+            .iter()
+            .find(|c| c.phantom && c.lane == 0)
+            .expect("a phantom where the wall's shadow starts")
+            .s;
+        assert!((near - edge - 8.5).abs() < 1.0, "{}", near - edge);
+        env.place_car(0, edge - 10.0, 20.0).unwrap();
+        let (cars, threat) = verdict(&env);
+        assert!(cars.iter().all(|c| c.phantom || c.lane != 0), "hidden");
+        let threat = threat.expect("the shadow may hold more cars than its phantom");
+        assert!(threat.car.phantom);
+        assert_eq!((threat.car.lane, threat.kind), (0, ThreatKind::Crossing));
+        env.step(0).unwrap();
+        assert_eq!(env.outcome(), Some(Outcome::Collision), "going hits him");
     }
 
     #[test]

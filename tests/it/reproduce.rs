@@ -107,6 +107,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
             assert_eq!(cell_trials(&row[method]), 300, "{method}: {row}");
         }
         assert_shielded(&row["shielded"], "dqn:", row);
+        assert_shielded(&row["shield_alone"], "ttc-creep:0", row);
     }
     let t3 = r["table3"].as_array().expect("table3");
     assert_eq!(t3.len(), 5);

@@ -257,6 +257,9 @@ pub struct Row2 {
     pub sequential: Option<Cell>,
     /// DQN-Creep behind the safety shield (not in the paper).
     pub shielded: Option<Cell>,
+    /// The shield alone: TTC with creep at 0 s behind it (not in the
+    /// paper).
+    pub shield_alone: Option<Cell>,
 }
 
 /// One training run and what it cost.
@@ -482,6 +485,18 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
     let shielded = |experiment: &str, scenario: &str, actions: ActionSet| {
         eval_run(experiment, scenario, actions, true)
     };
+    // A baseline at 0 s behind the shield: it goes whenever the shield
+    // lets it (with the networks' columns).
+    let shield_alone = |scenario: &str, policy: &str, actions: ActionSet| {
+        stop()?;
+        if !plan.dqn {
+            return Ok(None);
+        }
+        let (policy, counters) = behind_shield(crossroads_sim::parse_policy(policy)?);
+        let name = format!("{} + shield", policy.name());
+        let sc = load_scenario(scenario)?;
+        evaluate_policy(plan, &name, &sc, actions, policy.as_ref(), counters).map(Some)
+    };
     // Table I's rows; Figure 3 plots the same cells.
     for &s in open_scenarios(plan) {
         {
@@ -497,22 +512,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                 },
                 ttg: dqn(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
                 shielded: shielded(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
-                shield_alone: if plan.dqn {
-                    stop()?;
-                    let sc = load_scenario(s)?;
-                    let ttc = crossroads_sim::parse_policy("ttc:0")?;
-                    let (policy, counters) = behind_shield(ttc);
-                    Some(evaluate_policy(
-                        plan,
-                        "ttc:0 + shield",
-                        &sc,
-                        ActionSet::Ttg,
-                        policy.as_ref(),
-                        counters,
-                    )?)
-                } else {
-                    None
-                },
+                shield_alone: shield_alone(s, "ttc:0", ActionSet::Ttg)?,
             });
         }
     }
@@ -532,6 +532,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                     None
                 },
                 shielded: shielded("creep-occluded", &s, ActionSet::Creep)?,
+                shield_alone: shield_alone(&s, "ttc-creep:0", ActionSet::Creep)?,
             });
         }
     }

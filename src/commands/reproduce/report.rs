@@ -505,14 +505,24 @@ fn shield_md(w: &mut String, r: &Results) {
         });
         dqn.into_iter().chain(alone)
     });
-    let rows2 = r.table2.iter().filter_map(|row| {
-        let s = row.shielded.as_ref()?;
-        Some((
-            format!("{} m", row.length_m),
-            s,
-            row.ttc_creep.as_ref(),
-            None,
-        ))
+    let rows2 = r.table2.iter().flat_map(|row| {
+        let dqn = row.shielded.as_ref().map(|s| {
+            (
+                format!("{} m", row.length_m),
+                s,
+                row.ttc_creep.as_ref(),
+                None,
+            )
+        });
+        let alone = row.shield_alone.as_ref().map(|s| {
+            (
+                format!("{} m, shield alone", row.length_m),
+                s,
+                row.ttc_creep.as_ref(),
+                None,
+            )
+        });
+        dqn.into_iter().chain(alone)
     });
     let rows: Vec<_> = rows1.chain(rows2).collect();
     if rows.is_empty() {
@@ -524,7 +534,8 @@ fn shield_md(w: &mut String, r: &Results) {
          `crossroads eval --policy <run>/best --shield` on the same trials: every *go* the \
          network chooses is checked against the cars the ego senses and phantom cars where \
          its view ends, and vetoed when any could come too close (`sim::shield`). The \
-         shield alone is `--policy ttc:0 --shield`: go whenever the shield lets the ego. \
+         shield alone is `--policy ttc:0 --shield` (`ttc-creep:0 --actions creep` on Table \
+         II): go whenever the shield lets the ego. \
          Targets: no collision, at least the TTC column's success; on Table I also a mean \
          time at least 15 % below TTC's and within 5 % of the unshielded DQN's.\n\n\
          | row | collisions | success vs TTC | time / TTC's | time / DQN's | go vetoed |\n\
