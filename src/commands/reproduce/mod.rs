@@ -493,7 +493,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
             return Ok(None);
         }
         let (policy, counters) = behind_shield(crossroads_sim::parse_policy(policy)?);
-        let name = format!("{} + shield", policy.name());
+        let name = policy.name();
         let sc = load_scenario(scenario)?;
         evaluate_policy(plan, &name, &sc, actions, policy.as_ref(), counters).map(Some)
     };
