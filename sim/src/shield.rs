@@ -498,6 +498,22 @@ mod tests {
         (cars, threat)
     }
 
+    /// The shield's verdict under the assumptions `spec` (`--shield`'s).
+    fn verdict_under(env: &Env, spec: &str) -> Option<Threat> {
+        let p = ShieldParams::parse(spec).unwrap();
+        let mut cars = Vec::new();
+        sense(env, &p, &mut cars);
+        check_go(env, &cars, &p)
+    }
+
+    /// The lane the ego's route turns into.
+    fn merge_lane(env: &Env) -> usize {
+        let lanes = env.scenario().lanes();
+        (0..lanes.len())
+            .find(|&i| lanes[i].zone.is_some_and(|z| z.merge))
+            .expect("the route turns into a lane")
+    }
+
     /// Lane coordinate where `lane` meets the ego's route.
     fn lane_in(env: &Env, lane: usize) -> f64 {
         env.scenario().lanes()[lane].zone.unwrap().lane_in
@@ -543,11 +559,8 @@ mod tests {
         let mut env = empty("left");
         env.place_car(0, near - 25.0, 15.0).unwrap();
         assert_eq!(verdict(&env).1, None, "he gives way braking hard");
-        let comfortable = ShieldParams::parse("yield_decel=4.5").unwrap();
-        let mut cars = Vec::new();
-        sense(&env, &comfortable, &mut cars);
         assert_eq!(
-            check_go(&env, &cars, &comfortable).map(|t| t.kind),
+            verdict_under(&env, "yield_decel=4.5").map(|t| t.kind),
             Some(ThreatKind::Crossing),
             "counting on comfortable braking only"
         );
@@ -574,9 +587,7 @@ mod tests {
         // Right: the ego turns into the near lane, in front of cars from
         // the west.
         let mut env = empty("right");
-        let lane = (0..env.scenario().lanes().len())
-            .find(|&i| env.scenario().lanes()[i].zone.is_some_and(|z| z.merge))
-            .expect("right merges");
+        let lane = merge_lane(&env);
         let entry = lane_in(&env, lane);
         env.place_car(lane, entry - 20.0, 20.0).unwrap();
         let threat = verdict(&env).1.expect("20 m behind at 20 m/s");
@@ -589,9 +600,7 @@ mod tests {
      {
         // Left: the ego turns into the far lane, cars come from the east.
         let env = empty("left");
-        let lane = (0..env.scenario().lanes().len())
-            .find(|&i| env.scenario().lanes()[i].zone.is_some_and(|z| z.merge))
-            .expect("left merges");
+        let lane = merge_lane(&env);
         let entry = lane_in(&env, lane);
         // At the limit 2 m short of the entry point: he is past it in well
         // under a second, the ego needs seconds from the stop line.
@@ -600,10 +609,7 @@ mod tests {
         assert_eq!(verdict(&env).1, None, "he has no cause to brake");
         // Requiring him to be clear 5 s before the ego, the shield fears he
         // might brake as hard as a car can and stop where the ego enters.
-        let wary = ShieldParams::parse("clear_s=5").unwrap();
-        let mut cars = Vec::new();
-        sense(&env, &wary, &mut cars);
-        let threat = check_go(&env, &cars, &wary).expect("he may stop in the ego's way");
+        let threat = verdict_under(&env, "clear_s=5").expect("he may stop in the ego's way");
         assert_eq!((threat.car.lane, threat.kind), (lane, ThreatKind::Ahead));
     }
 
@@ -617,15 +623,10 @@ mod tests {
         env.clear_traffic();
         env.set_occluders(&[]);
         env.set_ego(sc.spec().ego.creep_limit_s, 0.0, false);
-        let lane = (0..sc.lanes().len())
-            .find(|&i| sc.lanes()[i].zone.is_some_and(|z| z.merge))
-            .expect("a left turn merges");
+        let lane = merge_lane(&env);
         env.place_car(lane, lane_in(&env, lane) - behind, v)
             .unwrap();
-        let p = ShieldParams::parse(spec).unwrap();
-        let mut cars = Vec::new();
-        sense(&env, &p, &mut cars);
-        (lane, check_go(&env, &cars, &p))
+        (lane, verdict_under(&env, spec))
     }
 
     #[test]
@@ -758,30 +759,22 @@ mod tests {
         // of it, both at 18 m/s.
         let scene = || {
             let mut env = empty("left2");
-            let lane = (0..env.scenario().lanes().len())
-                .find(|&i| env.scenario().lanes()[i].zone.is_some_and(|z| z.merge))
-                .expect("left2 merges");
+            let lane = merge_lane(&env);
             let entry = lane_in(&env, lane);
             env.place_car(lane, entry, 18.0).unwrap();
             env.place_car(lane, entry - 22.0, 18.0).unwrap();
             (env, lane)
         };
-        let shield = |env: &Env, spec: &str| {
-            let p = ShieldParams::parse(spec).unwrap();
-            let mut cars = Vec::new();
-            sense(env, &p, &mut cars);
-            check_go(env, &cars, &p)
-        };
         // Counting on him to fall in braking at 9 m/s², the shield lets the
         // ego go; the simulator's driver brakes as IDM bids and hits it.
         let (mut env, _) = scene();
-        assert_eq!(shield(&env, "fall_in_decel=9"), None);
+        assert_eq!(verdict_under(&env, "fall_in_decel=9"), None);
         env.step(0).unwrap();
         assert_eq!(env.outcome(), Some(Outcome::Collision));
         // Counting on 7 m/s², it keeps the ego waiting: he may still be
         // alongside when the ego enters his lane.
         let (env, lane) = scene();
-        let threat = shield(&env, "default").expect("he may not fall in behind in time");
+        let threat = verdict_under(&env, "default").expect("he may not fall in behind in time");
         assert_eq!(threat.car.lane, lane);
         assert!(threat.car.s < lane_in(&env, lane) - 20.0, "the follower");
     }

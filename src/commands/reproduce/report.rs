@@ -486,43 +486,40 @@ fn shortfalls_md(w: &mut String, r: &Results) {
     );
 }
 
+/// The shield section's rows of one table row: the network behind the
+/// shield and the shield alone (`[shielded, alone]`), each with the row's
+/// TTC and unshielded DQN cells to compare against.
+fn shield_rows<'a>(
+    label: String,
+    [shielded, alone]: [Option<&'a Cell>; 2],
+    ttc: Option<&'a Cell>,
+    dqn: Option<&'a Cell>,
+) -> impl Iterator<Item = (String, &'a Cell, Option<&'a Cell>, Option<&'a Cell>)> {
+    let alone_label = format!("{label}, shield alone");
+    let shielded = shielded.map(|s| (label, s, ttc, dqn));
+    let alone = alone.map(|s| (alone_label, s, ttc, dqn));
+    shielded.into_iter().chain(alone)
+}
+
 /// The safety shield's targets per row: zero collisions; at least TTC's
 /// success; on Table I a mean time at least 15 % below TTC's and within
 /// 5 % of the unshielded DQN's.
 fn shield_md(w: &mut String, r: &Results) {
     let rows1 = r.table1.iter().flat_map(|row| {
-        let dqn = row
-            .shielded
-            .as_ref()
-            .map(|s| (title(&row.scenario), s, row.ttc.as_ref(), row.ttg.as_ref()));
-        let alone = row.shield_alone.as_ref().map(|s| {
-            (
-                format!("{}, shield alone", title(&row.scenario)),
-                s,
-                row.ttc.as_ref(),
-                row.ttg.as_ref(),
-            )
-        });
-        dqn.into_iter().chain(alone)
+        shield_rows(
+            title(&row.scenario),
+            [row.shielded.as_ref(), row.shield_alone.as_ref()],
+            row.ttc.as_ref(),
+            row.ttg.as_ref(),
+        )
     });
     let rows2 = r.table2.iter().flat_map(|row| {
-        let dqn = row.shielded.as_ref().map(|s| {
-            (
-                format!("{} m", row.length_m),
-                s,
-                row.ttc_creep.as_ref(),
-                None,
-            )
-        });
-        let alone = row.shield_alone.as_ref().map(|s| {
-            (
-                format!("{} m, shield alone", row.length_m),
-                s,
-                row.ttc_creep.as_ref(),
-                None,
-            )
-        });
-        dqn.into_iter().chain(alone)
+        shield_rows(
+            format!("{} m", row.length_m),
+            [row.shielded.as_ref(), row.shield_alone.as_ref()],
+            row.ttc_creep.as_ref(),
+            None,
+        )
     });
     let rows: Vec<_> = rows1.chain(rows2).collect();
     if rows.is_empty() {
