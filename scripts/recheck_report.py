@@ -8,6 +8,8 @@ holds.
 For each DQN cell of Tables I and II (DQN-TTG, DQN-Sequential, DQN-Creep,
 and the shielded columns) it runs `crossroads eval --policy
 <report>/runs/<run>/best --scenario <s> --seed <seed> --trials <n> --json`
+(an experiment trained as several members, `<run>-seed<k>`, is evaluated
+as their ensemble, the comma-joined `best/` folders, as the report did)
 and prints the report's figure beside the re-measured one with its 95 %
 interval. A figure is "inside" when the report's value lies in the
 re-measure's interval, "overlap" when the report's own 95 % interval
@@ -54,6 +56,18 @@ def cells(results):
         )
 
 
+def policy_of(report, run):
+    """The run's best weights, joined with those of its other members
+    (`<run>-seed<k>`) when the experiment was trained as an ensemble."""
+    runs = os.path.join(report, "runs")
+    members = [run] + sorted(
+        (d for d in os.listdir(runs)
+         if d.startswith(run + "-seed") and d[len(run) + 5:].isdigit()),
+        key=lambda d: int(d[len(run) + 5:]),
+    )
+    return ",".join(os.path.join(runs, m, "best") for m in members)
+
+
 def verdict(reported, measured, interval, own):
     lo, hi = interval
     if lo - 1e-9 <= reported <= hi + 1e-9:
@@ -88,7 +102,7 @@ def main():
     for label, run, scenario, actions, shield, cell in cells(results):
         if not cell:
             continue
-        policy = os.path.join(args.report, "runs", run, "best") if run else "ttc:0"
+        policy = policy_of(args.report, run) if run else "ttc:0"
         cmd = [args.bin, "eval", "--policy", policy, "--scenario", scenario,
                "--actions", actions, "--seed", str(args.seed), "--trials", str(trials), "--json"]
         if shield:

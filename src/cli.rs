@@ -470,8 +470,10 @@ pub enum CheckpointsAction {
 #[derive(Debug, Args)]
 pub struct PolicyArgs {
     /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, or a trained
-    /// network: a checkpoint folder (runs/NAME/checkpoints/ckpt-...) or a
-    /// weights .safetensors file.
+    /// network: a checkpoint folder (runs/NAME/best,
+    /// runs/NAME/checkpoints/ckpt-...) or a weights .safetensors file;
+    /// several networks of the same kind joined by commas act on the mean
+    /// of their Q-values (an ensemble).
     #[arg(long, short = 'p')]
     pub policy: String,
     /// Scenario: right, left, left2, forward, challenge, occluded,

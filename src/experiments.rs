@@ -38,6 +38,29 @@ pub const EXPERIMENTS: &[Experiment] = experiments![
     "sequential-occluded",
 ];
 
+/// How many networks `crossroads reproduce` trains for the experiment
+/// `name`, each from its own seed, to act on the mean of their Q-values:
+/// 1, except on Left, where one network's rare mistakes (about 2 in 10,000
+/// trials, each at a state that collides in every future; NOTES.md) are
+/// twice the paper's collision rate and independently trained networks make
+/// different ones.
+pub fn members(name: &str) -> u32 {
+    match name {
+        "ttg-left" => 3,
+        _ => 1,
+    }
+}
+
+/// The run folder of member `k` (from 1) of the experiment `name`: the
+/// experiment's own name for the first, `<name>-seed<k>` for the others.
+pub fn member_run(name: &str, k: u32) -> String {
+    if k <= 1 {
+        name.to_owned()
+    } else {
+        format!("{name}-seed{k}")
+    }
+}
+
 /// The experiment called `name` (`ttg-left`, say).
 pub fn named(name: &str) -> Option<Experiment> {
     EXPERIMENTS.iter().copied().find(|e| e.name == name)

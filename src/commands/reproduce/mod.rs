@@ -13,7 +13,7 @@
 mod paper;
 mod report;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
@@ -164,6 +164,16 @@ impl Plan {
         names
     }
 
+    /// Networks trained for `experiment` ([`experiments::members`]; one
+    /// with `--quick`, which checks the pipeline, not the results).
+    fn members(&self, experiment: &str) -> u32 {
+        if self.quick {
+            1
+        } else {
+            experiments::members(experiment)
+        }
+    }
+
     fn run_dir(&self, experiment: &str) -> PathBuf {
         self.out.join("runs").join(experiment)
     }
@@ -309,9 +319,18 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
     check_mode(&plan)?;
 
     let names = plan.experiments();
-    for (i, name) in names.iter().enumerate() {
-        eprintln!("[{}/{}] {name}", i + 1, names.len());
-        train(&plan, name, &shutdown)?;
+    let runs: Vec<(String, u32)> = names
+        .iter()
+        .flat_map(|name| (1..=plan.members(name)).map(move |k| (name.clone(), k)))
+        .collect();
+    for (i, (name, k)) in runs.iter().enumerate() {
+        eprintln!(
+            "[{}/{}] {}",
+            i + 1,
+            runs.len(),
+            experiments::member_run(name, *k)
+        );
+        train(&plan, name, *k, &shutdown)?;
     }
 
     let mut results = Results {
@@ -324,13 +343,14 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
         ..Results::default()
     };
     evaluate_all(&plan, &mut results, &shutdown)?;
-    for name in &names {
-        let dir = plan.run_dir(name);
+    for (name, k) in &runs {
+        let run = experiments::member_run(name, *k);
+        let dir = plan.run_dir(&run);
         let summary = Summary::load(&dir)?
             .with_context(|| format!("{} has no summary.json", dir.display()))?;
         let curve = read_curve(&dir.join("curve.csv")).unwrap_or_default();
         results.runs.push(RunRecord {
-            experiment: name.clone(),
+            experiment: run,
             summary,
             curve,
         });
@@ -360,11 +380,13 @@ fn check_mode(plan: &Plan) -> anyhow::Result<()> {
     }
 }
 
-/// Trains `experiment` unless its run finished; resumes an interrupted
-/// one. The child is `crossroads train` in this process group, so Ctrl-C
-/// reaches it too and it stops cleanly (a later reproduce resumes it).
-fn train(plan: &Plan, experiment: &str, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let dir = plan.run_dir(experiment);
+/// Trains member `member` (from 1) of `experiment` unless its run
+/// finished; resumes an interrupted one. Members after the first train from
+/// seed `member` (actor and learner). The child is `crossroads train` in
+/// this process group, so Ctrl-C reaches it too and it stops cleanly (a
+/// later reproduce resumes it).
+fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let dir = plan.run_dir(&experiments::member_run(experiment, member));
     if let Some(s) = Summary::load(&dir)?
         && matches!(s.status.as_str(), "finished" | "target")
     {
@@ -395,6 +417,11 @@ fn train(plan: &Plan, experiment: &str, shutdown: &Shutdown) -> anyhow::Result<(
     cmd.env_remove("CROSSROADS_EXPERIMENT");
     for set in &plan.sets {
         cmd.arg("--set").arg(set);
+    }
+    if member > 1 {
+        for key in ["actor.seed", "learner.seed"] {
+            cmd.arg("--set").arg(format!("{key}={member}"));
+        }
     }
     cmd.arg("--config")
         .arg(&config)
@@ -473,11 +500,13 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                     shield: bool|
      -> anyhow::Result<Option<Cell>> {
         stop()?;
-        let dir = plan.run_dir(experiment);
-        if !plan.dqn || !dir.exists() {
+        let dirs: Vec<PathBuf> = (1..=plan.members(experiment))
+            .map(|k| plan.run_dir(&experiments::member_run(experiment, k)))
+            .collect();
+        if !plan.dqn || !dirs.iter().all(|d| d.exists()) {
             return Ok(None);
         }
-        evaluate_network(plan, &dir, scenario, actions, shield)
+        evaluate_network(plan, &dirs, scenario, actions, shield)
     };
     let dqn = |experiment: &str, scenario: &str, actions: ActionSet| {
         eval_run(experiment, scenario, actions, false)
@@ -610,20 +639,20 @@ fn sweep(
     Ok(report)
 }
 
-/// The best weights of the run in `dir` on `scenario`, behind the safety
-/// shield (its default assumptions) when `shield`; `None` when the
-/// network cannot read that scenario's observations (transfer across
-/// different grids).
+/// The best weights of the runs in `dirs` (one, or an experiment's
+/// ensemble) on `scenario`, behind the safety shield (its default
+/// assumptions) when `shield`; `None` when the network cannot read that
+/// scenario's observations (transfer across different grids).
 fn evaluate_network(
     plan: &Plan,
-    dir: &Path,
+    dirs: &[PathBuf],
     scenario: &str,
     actions: ActionSet,
     shield: bool,
 ) -> anyhow::Result<Option<Cell>> {
-    let best = dir.join("best");
-    let network = NetworkPolicy::load(&best)?
-        .with_context(|| format!("{} holds no weights", best.display()))?;
+    let best: Vec<PathBuf> = dirs.iter().map(|d| d.join("best")).collect();
+    let network = NetworkPolicy::load_members(&best)?;
+    let dir = &dirs[0];
     let sc = load_scenario(scenario)?;
     if let Err(e) = network.fits(&Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions))) {
         eprintln!("  {} on {scenario}: skipped, {e:#}", dir.display());

@@ -591,6 +591,12 @@ fn training_md(w: &mut String, r: &Results) {
          | run | status | actors | updates | env steps | minutes | best greedy evaluation | best at (min / env steps) | target at (min / env steps) |\n\
          | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
+    let members: Vec<&str> = r
+        .runs
+        .iter()
+        .map(|run| run.experiment.as_str())
+        .filter(|name| name.contains("-seed"))
+        .collect();
     for run in &r.runs {
         let s = &run.summary;
         let best = s.best.as_ref();
@@ -620,6 +626,19 @@ fn training_md(w: &mut String, r: &Results) {
                 t.env_steps
             )),
             name = run.experiment,
+        );
+    }
+    if !members.is_empty() {
+        let _ = writeln!(
+            w,
+            "\n{} trained the same experiment from other seeds (actor.seed and learner.seed \
+             = k): that experiment's cells act on the mean Q-values of every member's best \
+             weights (a `dqn-mean:` policy; `crossroads eval --policy a/best,b/best,...`).",
+            members
+                .iter()
+                .map(|m| format!("`{m}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
     }
     let _ = writeln!(w, "\n![Learning curves](curves.png)\n");
