@@ -18,7 +18,8 @@ use std::time::{Duration, Instant};
 use crossroads_common::config::TransportConfig;
 use crossroads_common::transport::grpc::{ClientError, InsertStream, ReplayClient};
 use crossroads_common::transport::shm::{ShmBatchPublisher, ShmError};
-use crossroads_common::{ActorTransport, Backoff, Shutdown, TransitionBatch};
+use crossroads_common::{ActorTransport, Backoff, Shutdown};
+use crossroads_types::TransitionBatch;
 
 use crate::buffer::PushBuffer;
 use crate::error::ActorError;

@@ -13,9 +13,9 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use crossroads_common::batch::{BatchError, RejectReason};
 use crossroads_common::{Shutdown, wire};
 use crossroads_proto::v1 as pb;
+use crossroads_types::batch::{BatchError, RejectReason};
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;

@@ -15,9 +15,9 @@ use crossroads_proto::v1::replay_client::ReplayClient as PbClient;
 use tokio::sync::mpsc;
 use tonic::transport::{Channel, Endpoint};
 
-use crate::batch::{BatchError, TransitionBatch};
 use crate::config::TransportConfig;
 use crate::wire;
+use crossroads_types::batch::{BatchError, RejectReason, TransitionBatch};
 
 /// Why a replay call failed.
 #[derive(Debug, thiserror::Error)]
@@ -197,7 +197,7 @@ impl ReplayClient {
             .batch
             .ok_or_else(|| {
                 BatchError::new(
-                    crate::batch::RejectReason::BadRequest,
+                    RejectReason::BadRequest,
                     "batch",
                     "missing from the sample response",
                 )
@@ -207,7 +207,7 @@ impl ReplayClient {
         if response.keys.len() != n || response.weights.len() != n || response.priorities.len() != n
         {
             return Err(BatchError::new(
-                crate::batch::RejectReason::LengthMismatch,
+                RejectReason::LengthMismatch,
                 "keys",
                 format!(
                     "{} keys, {} weights, {} priorities for {n} transitions",

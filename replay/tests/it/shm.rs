@@ -60,7 +60,7 @@ fn publisher_child() {
     publisher.send(5, &other).expect("send");
     let acks = publisher.flush(Duration::from_secs(20)).expect("answered");
     assert_eq!(acks.len(), 1);
-    assert_eq!(acks[0].outcome, Err(crossroads_common::RejectReason::Spec));
+    assert_eq!(acks[0].outcome, Err(crossroads_types::RejectReason::Spec));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
