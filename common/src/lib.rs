@@ -1,6 +1,6 @@
 //! What every crossroads role shares: configuration, telemetry, metrics,
-//! shutdown and the transports that carry transition batches (the batches
-//! themselves are `crossroads_types`).
+//! shutdown and retry. The domain types are `crossroads_types`; the
+//! conversations between processes `crossroads_transport`.
 //!
 //! - [`config`]: the one TOML schema of a run ([`Config`], a section per
 //!   concern) and its layered loading ([`ConfigLoader`]: defaults, file,
@@ -12,10 +12,6 @@
 //!   [`MetricsServer`] that serves it at `/metrics`.
 //! - [`shutdown`]: the [`Shutdown`] signal (SIGINT, SIGTERM or a call) that
 //!   every server and loop takes as an input.
-//! - [`wire`]: conversion between `crossroads_proto` batches and the domain,
-//!   validating at the boundary.
-//! - [`transport`]: the replay server's gRPC client and the iceoryx2 batch
-//!   publisher with its `#[repr(C)]` frame.
 //! - [`retry`]: [`Backoff`], exponential with jitter.
 
 pub mod config;
@@ -23,8 +19,6 @@ pub mod metrics;
 pub mod retry;
 pub mod shutdown;
 pub mod telemetry;
-pub mod transport;
-pub mod wire;
 
 pub use config::{
     ActorConfig, ActorTransport, Config, ConfigError, ConfigLoader, ConfigProblem, LearnerConfig,

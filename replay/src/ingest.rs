@@ -21,7 +21,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::shm::{self, ShmError};
+use crossroads_transport::shm::{self, ShmError};
 use crossroads_types::batch::{BatchError, RejectReason};
 
 use crate::metrics::Transport;

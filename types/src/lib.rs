@@ -11,6 +11,7 @@
 //!   [`TrunkKind`]).
 //! - [`weights`]: the metadata of a weights file ([`WeightsMeta`]), read
 //!   from the safetensors header without building a tensor.
+//! - [`checkpoint`]: which names a checkpoint may have.
 //!
 //! Invariant, enforced by the crate graph: this crate depends on no tensor
 //! library (tch), no RPC framework (tonic) and no wire format (prost), so
@@ -19,6 +20,7 @@
 //! `crossroads_model`.
 
 pub mod batch;
+pub mod checkpoint;
 pub mod codec;
 pub mod spec;
 pub mod weights;

@@ -5,9 +5,9 @@
 use std::time::Duration;
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::grpc::{ClientError, ReplayClient};
 use crossroads_common::{Config, Shutdown};
 use crossroads_replay::{RunningServer, TableImage};
+use crossroads_transport::grpc::{ClientError, ReplayClient};
 use crossroads_types::{RejectReason, TransitionBatch};
 
 use crate::util::{batch, server_config};

@@ -1,9 +1,9 @@
-//! Conversion between the wire (`crossroads_proto::v1`) and the domain
-//! (`crossroads_types::batch`), validating at the boundary: a wire batch becomes a
-//! [`TransitionBatch`] only if [`TransitionBatch::validate`] accepts it.
+//! Conversion of transition batches between the wire
+//! (`crossroads_proto::v1`) and the domain (`crossroads_types::batch`),
+//! validating at the boundary: a wire batch becomes a [`TransitionBatch`]
+//! only if [`TransitionBatch::validate`] accepts it.
 
 use crossroads_proto::v1 as pb;
-
 use crossroads_types::batch::{
     BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch,
 };
