@@ -4,11 +4,12 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use crossroads_common::codec::ObservationEncoding;
 use crossroads_common::retry::Backoff;
-use crossroads_common::transport::grpc::ReplayClient;
-use crossroads_common::{ActorConfig, Shutdown, TransitionBatch, TransportConfig};
+use crossroads_common::{ActorConfig, Shutdown, TransportConfig};
 use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
+use crossroads_transport::grpc::ReplayClient;
+use crossroads_types::TransitionBatch;
+use crossroads_types::codec::ObservationEncoding;
 
 use crate::error::ActorError;
 use crate::exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode};

@@ -4,7 +4,7 @@ use std::collections::VecDeque;
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
-use crossroads_common::TransitionBatch;
+use crossroads_types::TransitionBatch;
 
 use crate::metrics::ActorMetrics;
 

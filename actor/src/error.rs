@@ -1,7 +1,7 @@
 //! The error type of the crate.
 
-use crossroads_common::transport::grpc::ClientError;
-use crossroads_common::transport::shm::ShmError;
+use crossroads_transport::grpc::ClientError;
+use crossroads_transport::shm::ShmError;
 
 /// What can stop an actor. Network failures are not among them: the
 /// pusher buffers and retries those.

@@ -11,7 +11,7 @@
 //! episode, or greedy in evaluation [`Mode`]), steps the environments and
 //! assembles n-step transitions over k-step actions (windows cut before an
 //! exploratory action) with initial priorities from its own Q estimates; a [`BatchBuilder`] packs them into
-//! [`TransitionBatch`](crossroads_common::TransitionBatch)es.
+//! [`TransitionBatch`](crossroads_types::TransitionBatch)es.
 //! [`Actor::run`] is the acting loop. A [`Pusher`] delivers batches over
 //! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`] (oldest
 //! dropped first), retrying with backoff and reconnecting.

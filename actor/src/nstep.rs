@@ -22,8 +22,8 @@
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
-use crossroads_common::codec::ObservationEncoding;
-use crossroads_common::{ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::codec::ObservationEncoding;
+use crossroads_types::{ObservationSpec, Transition, TransitionBatch};
 
 use crate::values::max_value;
 

@@ -16,9 +16,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::grpc::{ClientError, InsertStream, ReplayClient};
-use crossroads_common::transport::shm::{ShmBatchPublisher, ShmError};
-use crossroads_common::{ActorTransport, Backoff, Shutdown, TransitionBatch};
+use crossroads_common::{ActorTransport, Backoff, Shutdown};
+use crossroads_transport::grpc::{ClientError, InsertStream, ReplayClient};
+use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
+use crossroads_types::TransitionBatch;
 
 use crate::buffer::PushBuffer;
 use crate::error::ActorError;

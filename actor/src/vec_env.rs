@@ -3,9 +3,9 @@
 
 use std::sync::Arc;
 
-use crossroads_common::ObservationSpec;
-use crossroads_common::codec::{self, ObservationEncoding};
 use crossroads_sim::{Env, EnvConfig, ObsSpec, Outcome, Scenario, episode_seed};
+use crossroads_types::ObservationSpec;
+use crossroads_types::codec::{self, ObservationEncoding};
 use rayon::prelude::*;
 
 use crate::error::ActorError;

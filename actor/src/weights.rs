@@ -17,9 +17,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::config::TransportConfig;
 use crossroads_common::{ActorTransport, Backoff, Shutdown};
-use crossroads_learner::LearnerClient;
-use crossroads_learner::shm::ShmWeightsSubscriber;
 use crossroads_model::QNetwork;
+use crossroads_transport::LearnerClient;
+use crossroads_transport::weights_shm::ShmWeightsSubscriber;
 use tokio::sync::watch;
 
 use crate::error::ActorError;

@@ -1,5 +1,6 @@
 //! What every crossroads role shares: configuration, telemetry, metrics,
-//! shutdown, transition batches and the transports that carry them.
+//! shutdown and retry. The domain types are `crossroads_types`; the
+//! conversations between processes `crossroads_transport`.
 //!
 //! - [`config`]: the one TOML schema of a run ([`Config`], a section per
 //!   concern) and its layered loading ([`ConfigLoader`]: defaults, file,
@@ -11,31 +12,14 @@
 //!   [`MetricsServer`] that serves it at `/metrics`.
 //! - [`shutdown`]: the [`Shutdown`] signal (SIGINT, SIGTERM or a call) that
 //!   every server and loop takes as an input.
-//! - [`batch`]: the domain [`TransitionBatch`] (struct-of-arrays n-step
-//!   transitions over an [`ObservationPool`] that holds each observation
-//!   once) and its validation, whose [`BatchError`] names the field.
-//! - [`codec`]: the observation codec (dense f32 or sparse cells), the same
-//!   bytes on gRPC and in shared memory.
-//! - [`wire`]: conversion between `crossroads_proto` batches and the domain,
-//!   validating at the boundary.
-//! - [`transport`]: the replay server's gRPC client and the iceoryx2 batch
-//!   publisher with its `#[repr(C)]` frame.
 //! - [`retry`]: [`Backoff`], exponential with jitter.
 
-pub mod batch;
-pub mod codec;
 pub mod config;
 pub mod metrics;
 pub mod retry;
 pub mod shutdown;
 pub mod telemetry;
-pub mod transport;
-pub mod wire;
 
-pub use batch::{
-    BatchError, ObservationPool, ObservationSpec, RejectReason, Transition, TransitionBatch,
-};
-pub use codec::ObservationEncoding;
 pub use config::{
     ActorConfig, ActorTransport, Config, ConfigError, ConfigLoader, ConfigProblem, LearnerConfig,
     LogFormat, ReplayConfig, TrainConfig, TransportConfig, WeightNormalization,

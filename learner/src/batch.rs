@@ -1,9 +1,9 @@
 //! [`TrainingBatch`]: a sampled batch as the tensors an update needs,
 //! checked against the network at the boundary.
 
-use crossroads_common::TransitionBatch;
-use crossroads_common::transport::grpc::Sampled;
 use crossroads_model::NetworkSpec;
+use crossroads_transport::grpc::Sampled;
+use crossroads_types::TransitionBatch;
 use tch::Tensor;
 
 use crate::LearnerError;

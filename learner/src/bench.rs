@@ -5,12 +5,10 @@
 
 use std::time::{Duration, Instant};
 
-use crossroads_common::transport::grpc::ReplayClient;
-use crossroads_common::{
-    Config, LearnerConfig, ObservationEncoding, ObservationSpec, Shutdown, Transition,
-    TransitionBatch,
-};
+use crossroads_common::{Config, LearnerConfig, Shutdown};
 use crossroads_model::NetworkSpec;
+use crossroads_transport::grpc::ReplayClient;
+use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 
 use crate::LearnerError;
 use crate::batch::TrainingBatch;

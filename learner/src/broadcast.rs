@@ -1,26 +1,11 @@
-//! [`WeightsHub`]: the latest published weights, for the gRPC stream and
-//! `GetLatestWeights`. Versions only increase.
+//! [`WeightsHub`]: the latest published weights
+//! ([`PublishedWeights`], a `crossroads_transport` type), for the gRPC
+//! stream and `GetLatestWeights`. Versions only increase.
 
 use std::sync::Arc;
 
-use crossroads_model::NetworkSpec;
+use crossroads_transport::convert::PublishedWeights;
 use tokio::sync::watch;
-
-/// One published version of the online network.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PublishedWeights {
-    /// Strictly increasing over the learner's life, across restores and
-    /// restarts.
-    pub version: u64,
-    /// Update step the weights come from.
-    pub update_step: u64,
-    /// The network.
-    pub spec: NetworkSpec,
-    /// safetensors bytes (with the spec and version in their metadata).
-    pub safetensors: Vec<u8>,
-    /// Unix milliseconds of publication.
-    pub published_unix_ms: i64,
-}
 
 /// Holds the latest weights; subscribers are woken on each new version
 /// (one that falls behind sees only the newest, never a stale one).

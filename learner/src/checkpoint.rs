@@ -25,6 +25,8 @@ use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use crossroads_model::NetworkSpec;
+use crossroads_transport::convert::CheckpointSummary;
+use crossroads_types::checkpoint::check_checkpoint_id;
 use parking_lot::Mutex;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
@@ -156,6 +158,22 @@ impl CheckpointEntry {
     }
 }
 
+impl From<&CheckpointEntry> for CheckpointSummary {
+    fn from(e: &CheckpointEntry) -> Self {
+        Self {
+            id: e.manifest.id.clone(),
+            update_step: e.manifest.update_step,
+            weights_version: e.manifest.weights_version,
+            created_unix_ms: e.manifest.created_unix_ms,
+            size_bytes: e.size_bytes,
+            scenario: e.manifest.scenario.clone(),
+            eval_metrics: e.manifest.eval_metrics.clone(),
+            best: e.best,
+            files: e.files(),
+        }
+    }
+}
+
 /// What a checkpoint restores.
 #[derive(Debug)]
 pub struct Loaded {
@@ -196,30 +214,15 @@ pub struct CheckpointStore {
     lock: Mutex<()>,
 }
 
-/// Checks that `id` is a plain checkpoint name: 1 to 128 of ASCII letters,
-/// digits, `-`, `_`, `.`, not starting with a dot (so not `.`, `..` or a
-/// temporary folder).
+/// Checks that `id` is a plain checkpoint name
+/// (`crossroads_types::checkpoint::check_checkpoint_id`: 1 to 128 of ASCII
+/// letters, digits, `-`, `_`, `.`, not starting with a dot, so not `.`,
+/// `..` or a temporary folder).
 pub fn validate_id(id: &str) -> Result<(), StoreError> {
-    let bad = |problem: &str| StoreError::InvalidId {
+    check_checkpoint_id(id).map_err(|problem| StoreError::InvalidId {
         id: id.to_owned(),
         problem: problem.to_owned(),
-    };
-    if id.is_empty() || id.len() > 128 {
-        return Err(bad("must be 1 to 128 characters"));
-    }
-    if id.contains(['/', '\\']) || id.contains("..") {
-        return Err(bad("must not contain path separators or '..'"));
-    }
-    if id.starts_with('.') {
-        return Err(bad("must not start with '.'"));
-    }
-    if !id
-        .chars()
-        .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
-    {
-        return Err(bad("may only hold ASCII letters, digits, '-', '_' and '.'"));
-    }
-    Ok(())
+    })
 }
 
 fn now_ms() -> i64 {

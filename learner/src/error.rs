@@ -1,7 +1,7 @@
 //! [`LearnerError`], what can stop the learner or fail one of its calls.
 
-use crossroads_common::transport::grpc::ClientError;
 use crossroads_model::ModelError;
+use crossroads_transport::grpc::ClientError;
 
 use crate::checkpoint::StoreError;
 

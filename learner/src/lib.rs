@@ -10,13 +10,15 @@
 //! gradient clipping, target-network update), hands the new priorities to
 //! [`sampler::spawn_priority_sender`], and on its schedules publishes the
 //! weights (a monotonic version; [`broadcast::WeightsHub`] for the gRPC
-//! stream, [`shm::ShmWeightsPublisher`] for actors on this host) and writes
-//! checkpoints ([`CheckpointStore`]: safetensors weights, target network
-//! and optimizer state plus a JSON manifest, written atomically). The tonic
-//! service ([`service::LearnerService`]) serves weights, checkpoints and
-//! status; [`LearnerClient`] is its client. [`start`] / [`run`] put it all
-//! together under one shutdown signal. [`bench`](mod@bench) measures
-//! updates per second and the time spent waiting for samples.
+//! stream, `crossroads_transport::weights_shm::ShmWeightsPublisher` for
+//! actors on this host) and writes checkpoints ([`CheckpointStore`]:
+//! safetensors weights, target network and optimizer state plus a JSON
+//! manifest, written atomically). The tonic service
+//! ([`service::LearnerService`]) serves weights, checkpoints and status;
+//! its client (`LearnerClient`) and the conversions to and from the wire
+//! are in `crossroads_transport`. [`start`] / [`run`] put it all together
+//! under one shutdown signal. [`bench`](mod@bench) measures updates per
+//! second and the time spent waiting for samples.
 //!
 //! The whole configuration is the `[learner]` section
 //! ([`crossroads_common::LearnerConfig`]).
@@ -25,22 +27,18 @@ pub mod batch;
 pub mod bench;
 pub mod broadcast;
 pub mod checkpoint;
-pub mod client;
-pub mod convert;
 mod error;
 pub mod metrics;
 pub mod optimizer;
 pub mod sampler;
 pub mod server;
 pub mod service;
-pub mod shm;
 pub mod targets;
 pub mod trainer;
 pub mod training;
 
 pub use batch::TrainingBatch;
 pub use checkpoint::{CheckpointStore, StoreError};
-pub use client::{LearnerClient, LearnerClientError};
 pub use error::LearnerError;
 pub use metrics::LearnerMetrics;
 pub use optimizer::{Optimizer, OptimizerConfig};

@@ -8,9 +8,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use crossroads_common::config::LearnerConfig;
-use crossroads_common::transport::grpc::ReplayClient;
 use crossroads_common::{Backoff, Shutdown};
 use crossroads_model::NetworkSpec;
+use crossroads_transport::grpc::ReplayClient;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 

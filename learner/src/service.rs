@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use crossroads_common::Shutdown;
 use crossroads_proto::v1 as pb;
+use crossroads_transport::convert::{CheckpointSummary, checkpoint_to_wire, weights_to_wire};
 use tokio::sync::{mpsc, oneshot};
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
@@ -17,7 +18,6 @@ use tonic::{Request, Response, Status};
 
 use crate::LearnerError;
 use crate::checkpoint::{CheckpointStore, StoreError};
-use crate::convert::{CheckpointSummary, checkpoint_to_wire, weights_to_wire};
 use crate::training::{Command, Shared};
 
 /// Bytes per `CheckpointChunk`.

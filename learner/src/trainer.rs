@@ -58,7 +58,12 @@ pub fn network_spec(c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
         Trunk::Conv => TrunkKind::Conv,
     };
     let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
-    NetworkSpec::new(&c.observation, &c.action_set, trunk, hidden)
+    Ok(NetworkSpec::new(
+        &c.observation,
+        &c.action_set,
+        trunk,
+        hidden,
+    )?)
 }
 
 /// What one update measured.

@@ -9,17 +9,18 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::{Config, Shutdown};
+use crossroads_transport::convert::PublishedWeights;
+use crossroads_transport::weights_shm::ShmWeightsPublisher;
 use parking_lot::Mutex;
 use tokio::runtime::Handle;
 use tokio::sync::{mpsc, oneshot};
 
 use crate::LearnerError;
 use crate::batch::TrainingBatch;
-use crate::broadcast::{PublishedWeights, WeightsHub};
+use crate::broadcast::WeightsHub;
 use crate::checkpoint::{CheckpointEntry, CheckpointStore, NewCheckpoint};
 use crate::metrics::LearnerMetrics;
 use crate::sampler::{Prefetched, PriorityUpdate};
-use crate::shm::ShmWeightsPublisher;
 use crate::trainer::{Trainer, TrainerConfig};
 
 /// How often idle loops look for late shared-memory subscribers.

@@ -2,7 +2,7 @@
 
 use tch::Kind;
 
-use crate::spec::NetworkSpec;
+use crossroads_types::{NetworkSpec, SpecError};
 
 /// Why a network could not be built, run or loaded.
 #[derive(Debug, thiserror::Error)]
@@ -38,4 +38,13 @@ pub enum ModelError {
     /// libtorch refused.
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
+}
+
+impl From<SpecError> for ModelError {
+    fn from(e: SpecError) -> Self {
+        match e {
+            SpecError::Invalid(message) => ModelError::Spec(message),
+            SpecError::Format(message) => ModelError::Format(message),
+        }
+    }
 }

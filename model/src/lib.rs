@@ -4,7 +4,8 @@
 //! A [`NetworkSpec`] says what a network is: the [`ObservationLayout`] it
 //! reads (the simulator's channel-major grid plus dense ego features), the
 //! action set it scores and its trunk ([`TrunkKind::Mlp`] or
-//! [`TrunkKind::Conv`]). [`QNetwork`] builds it with value V(s) and
+//! [`TrunkKind::Conv`]); it and the weights metadata ([`WeightsMeta`]) are
+//! tch-free and live in `crossroads_types`, re-exported here. [`QNetwork`] builds it with value V(s) and
 //! advantage A(s, a) heads combined as Q = V + A - mean(A) (Wang et al.
 //! 2016); [`QNetwork::infer`] is the batched inference actors call, and
 //! [`QNetwork::q_values`] the differentiable forward pass the learner trains.
@@ -16,11 +17,13 @@
 mod dueling;
 mod error;
 mod network;
-pub mod spec;
 pub mod weights;
 
+pub use crossroads_types::spec::{
+    self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
+    num_actions_of,
+};
 pub use dueling::{DuelingMlp, MlpSpec};
 pub use error::ModelError;
 pub use network::{QBatch, QNetwork};
-pub use spec::{EGO_FEATURES, NetworkSpec, ObservationLayout, TrunkKind, num_actions_of};
 pub use weights::WeightsMeta;

@@ -1,13 +1,14 @@
 //! The weights format: safetensors (readable by Python's `safetensors` and
 //! PyTorch), f32 tensors under the network's variable names, and in the
-//! file's string metadata:
+//! file's string metadata ([`WeightsMeta`], [`FORMAT`], [`FORMAT_VERSION`],
+//! defined tch-free in `crossroads_types::weights` and re-exported here):
 //!
 //! | key | value |
 //! | --- | --- |
 //! | `format` | `crossroads.qnetwork` |
 //! | `format_version` | [`FORMAT_VERSION`] |
 //! | `weights_version` | the learner's monotonic version, decimal |
-//! | `spec` | the [`NetworkSpec`] as JSON |
+//! | `spec` | the [`NetworkSpec`](crate::NetworkSpec) as JSON |
 //!
 //! [`encode`] and [`decode`] are the generic halves, also used for other
 //! named tensors (the learner's optimizer state).
@@ -18,63 +19,8 @@ use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use tch::{Kind, Tensor};
 
 use crate::ModelError;
-use crate::spec::NetworkSpec;
 
-/// Value of the `format` metadata key.
-pub const FORMAT: &str = "crossroads.qnetwork";
-/// Version of this layout; a reader refuses others.
-pub const FORMAT_VERSION: u32 = 1;
-
-/// What the metadata of a weights file says.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct WeightsMeta {
-    /// The learner's version of these weights.
-    pub version: u64,
-    /// The network they belong to.
-    pub spec: NetworkSpec,
-}
-
-impl WeightsMeta {
-    /// The metadata map of a file.
-    pub fn to_metadata(&self) -> Result<HashMap<String, String>, ModelError> {
-        let spec = serde_json::to_string(&self.spec)
-            .map_err(|e| ModelError::Format(format!("cannot write the spec: {e}")))?;
-        Ok(HashMap::from([
-            ("format".to_owned(), FORMAT.to_owned()),
-            ("format_version".to_owned(), FORMAT_VERSION.to_string()),
-            ("weights_version".to_owned(), self.version.to_string()),
-            ("spec".to_owned(), spec),
-        ]))
-    }
-
-    /// Reads and checks the metadata map of a file.
-    pub fn from_metadata(metadata: &HashMap<String, String>) -> Result<Self, ModelError> {
-        let get = |key: &str| {
-            metadata
-                .get(key)
-                .ok_or_else(|| ModelError::Format(format!("metadata key {key:?} is missing")))
-        };
-        if get("format")? != FORMAT {
-            return Err(ModelError::Format(format!(
-                "format is {:?}, expected {FORMAT:?}",
-                get("format")?
-            )));
-        }
-        let format_version = get("format_version")?;
-        if format_version != &FORMAT_VERSION.to_string() {
-            return Err(ModelError::Format(format!(
-                "format_version is {format_version:?}; this build reads {FORMAT_VERSION}"
-            )));
-        }
-        let version = get("weights_version")?
-            .parse::<u64>()
-            .map_err(|e| ModelError::Format(format!("weights_version is not an integer: {e}")))?;
-        let spec: NetworkSpec = serde_json::from_str(get("spec")?)
-            .map_err(|e| ModelError::Format(format!("spec: {e}")))?;
-        spec.validate()?;
-        Ok(Self { version, spec })
-    }
-}
+pub use crossroads_types::weights::{FORMAT, FORMAT_VERSION, WeightsMeta};
 
 /// Serializes f32 tensors under their names, with `metadata`.
 pub fn encode(

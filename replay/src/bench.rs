@@ -7,9 +7,9 @@
 
 use std::time::{Duration, Instant};
 
-use crossroads_common::{
-    ObservationEncoding, ObservationSpec, Shutdown, Transition, TransitionBatch,
-};
+use crossroads_common::Shutdown;
+
+use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 

@@ -15,7 +15,7 @@
 //! relative to -1), a `u8` mask when channels > 1, and the references, each
 //! `ref_width(n_values)` bytes LE.
 
-use crossroads_common::codec::{self, ObservationEncoding};
+use crossroads_types::codec::{self, ObservationEncoding};
 
 /// Channels (last dimension) folded into a cell's mask; above this a value
 /// is its own cell.

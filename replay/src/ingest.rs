@@ -20,9 +20,9 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crossroads_common::batch::{BatchError, RejectReason};
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::shm::{self, ShmError};
+use crossroads_transport::shm::{self, ShmError};
+use crossroads_types::batch::{BatchError, RejectReason};
 
 use crate::metrics::Transport;
 use crate::service::State;
@@ -158,7 +158,7 @@ const TAKE_MAX: usize = 1024;
 struct Received {
     origin: u128,
     batch_id: u64,
-    read: Result<(String, u64, crossroads_common::TransitionBatch), BatchError>,
+    read: Result<(String, u64, crossroads_types::TransitionBatch), BatchError>,
 }
 
 /// Received batches by publisher, served one publisher after another.
@@ -239,7 +239,7 @@ fn handle(
     state: &State,
     runtime: &tokio::runtime::Handle,
     table: &Arc<Table>,
-    read: Result<(String, u64, crossroads_common::TransitionBatch), BatchError>,
+    read: Result<(String, u64, crossroads_types::TransitionBatch), BatchError>,
     draining: bool,
 ) -> Result<(u32, u64), RejectReason> {
     let reject = |e: BatchError| {

@@ -16,8 +16,8 @@ use std::time::Duration;
 
 use crossroads_common::Config;
 use crossroads_common::Shutdown;
-use crossroads_common::transport::shm::ShmError;
 use crossroads_proto::v1::replay_server::ReplayServer as PbServer;
+use crossroads_transport::shm::ShmError;
 use prometheus::Registry;
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;

@@ -1,7 +1,7 @@
 //! The gRPC `crossroads.v1.Replay` service over the server's tables.
 //!
 //! Each call converts its request into domain types at the boundary
-//! ([`crossroads_common::wire`]), rejecting anything invalid with
+//! ([`crossroads_transport::wire`]), rejecting anything invalid with
 //! INVALID_ARGUMENT (RESOURCE_EXHAUSTED when oversized) and a message that
 //! names the field, before any table is touched; every rejection is counted
 //! by reason. Rate-limiter timeouts are DEADLINE_EXCEEDED, a server
@@ -13,9 +13,11 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use crossroads_common::batch::{BatchError, RejectReason};
-use crossroads_common::{Shutdown, wire};
+use crossroads_common::Shutdown;
+
 use crossroads_proto::v1 as pb;
+use crossroads_transport::wire;
+use crossroads_types::batch::{BatchError, RejectReason};
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossroads_common::ObservationSpec;
+use crossroads_types::ObservationSpec;
 
 use crate::metrics::ReplayMetrics;
 use crate::table::{Table, TableImage};

@@ -18,12 +18,13 @@
 
 use std::time::{Duration, Instant};
 
-use crossroads_common::batch::{
+use crossroads_common::Shutdown;
+use crossroads_common::config::{ReplayConfig, WeightNormalization};
+use crossroads_types::ObservationEncoding;
+use crossroads_types::batch::{
     BatchError, MAX_OBSERVATION_LEN, ObservationPool, ObservationSpec, RejectReason,
     TransitionBatch, check_priority,
 };
-use crossroads_common::config::{ReplayConfig, WeightNormalization};
-use crossroads_common::{ObservationEncoding, Shutdown};
 use parking_lot::Mutex;
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;

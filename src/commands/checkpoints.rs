@@ -4,8 +4,8 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
-use crossroads_learner::LearnerClient;
-use crossroads_learner::convert::CheckpointSummary;
+use crossroads_transport::LearnerClient;
+use crossroads_transport::convert::CheckpointSummary;
 
 use crate::cli::{CheckpointsAction, CheckpointsArgs};
 

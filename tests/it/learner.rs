@@ -8,7 +8,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::grpc::ReplayClient;
+use crossroads_transport::grpc::ReplayClient;
 
 /// Starts `crossroads <args>` and returns it with the `addr=` of the log
 /// line containing `ready`.

@@ -6,8 +6,8 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::grpc::ReplayClient;
-use crossroads_common::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_transport::grpc::ReplayClient;
+use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 
 /// Starts the server and returns it with the address it logged.
 fn start(dir: &std::path::Path) -> (Child, String) {

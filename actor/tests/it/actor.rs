@@ -2,9 +2,9 @@
 //! per step, the epsilon ladder from the config, greedy evaluation.
 
 use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
-use crossroads_common::transport::grpc::ReplayClient;
 use crossroads_common::{ActorConfig, ConfigLoader, Shutdown};
 use crossroads_sim::Outcome;
+use crossroads_transport::grpc::ReplayClient;
 
 use crate::util::{actor, actor_config, batches, replay_config, transport};
 

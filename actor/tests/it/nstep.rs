@@ -4,8 +4,8 @@
 use std::sync::Arc;
 
 use crossroads_actor::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
-use crossroads_common::codec::ObservationEncoding;
-use crossroads_common::{ObservationSpec, codec};
+use crossroads_types::codec::ObservationEncoding;
+use crossroads_types::{ObservationSpec, codec};
 
 fn obs(id: u64) -> ObsRef {
     let mut bytes = Vec::new();

@@ -4,8 +4,9 @@
 use std::time::Duration;
 
 use crossroads_actor::{ActorMetrics, PushConfig, Pusher};
-use crossroads_common::transport::grpc::ReplayClient;
-use crossroads_common::{ActorTransport, Shutdown, TransitionBatch};
+use crossroads_common::{ActorTransport, Shutdown};
+use crossroads_transport::grpc::ReplayClient;
+use crossroads_types::TransitionBatch;
 
 use crate::util::{
     actor, actor_config, batches, eventually, replay_config, transport, unique_prefix,

@@ -4,8 +4,8 @@
 use std::sync::Arc;
 
 use crossroads_actor::{EnvStep, VecEnv};
-use crossroads_common::codec::ObservationEncoding;
 use crossroads_sim::{ActionSet, EnvConfig, Scenario};
+use crossroads_types::codec::ObservationEncoding;
 
 /// Observations and results of `steps` steps with a fixed action pattern,
 /// run on a pool of `threads`.
@@ -79,7 +79,7 @@ fn observations_are_contiguous_and_encoded() {
     let row1 = envs.observations()[len..2 * len].to_vec();
     let bytes = envs.take_encoded(1);
     let mut decoded = vec![0.0; len];
-    crossroads_common::codec::decode_into(ObservationEncoding::SparseF32, &bytes, &mut decoded)
+    crossroads_types::codec::decode_into(ObservationEncoding::SparseF32, &bytes, &mut decoded)
         .expect("decodes");
     assert_eq!(decoded, row1);
     assert!(envs.step(&[0, 1]).is_err(), "one action per environment");

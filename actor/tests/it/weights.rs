@@ -12,8 +12,8 @@ use crossroads_actor::{
     WeightsSlot, WeightsSubscription, WeightsUpdate,
 };
 use crossroads_common::{ActorTransport, Config, Shutdown};
-use crossroads_learner::shm::ShmWeightsPublisher;
 use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
+use crossroads_transport::weights_shm::ShmWeightsPublisher;
 
 use crate::util::{actor_config, eventually, replay_config, transport, unique_prefix};
 

@@ -7,8 +7,8 @@ mod python;
 mod server;
 mod training;
 
-use crossroads_common::{ObservationEncoding, ObservationSpec, TransitionBatch};
 use crossroads_model::{NetworkSpec, ObservationLayout, TrunkKind};
+use crossroads_types::{ObservationEncoding, ObservationSpec, TransitionBatch};
 
 /// A network over `n` one-hot states.
 pub fn toy_spec(n: i64, actions: i64, hidden: Vec<i64>) -> NetworkSpec {

@@ -7,9 +7,10 @@ use std::time::Duration;
 
 use crossroads_common::Config;
 use crossroads_common::Shutdown;
-use crossroads_common::transport::grpc::ReplayClient;
 use crossroads_learner::bench::fill_replay;
-use crossroads_learner::{LearnerClient, RunningLearner, TrainerConfig};
+use crossroads_learner::{RunningLearner, TrainerConfig};
+use crossroads_transport::LearnerClient;
+use crossroads_transport::grpc::ReplayClient;
 use tonic::Code;
 
 const TOKEN: &str = "s3cret-token";
@@ -298,7 +299,7 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
 
 #[test]
 fn weights_reach_a_late_shared_memory_subscriber() {
-    use crossroads_learner::shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
+    use crossroads_transport::weights_shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
     let transport = crossroads_common::TransportConfig {
         shm_prefix: format!("crossroads-test-{}-weights", std::process::id()),
         ..Default::default()

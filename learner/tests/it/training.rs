@@ -1,11 +1,11 @@
 //! The update: targets, loss, optimizers, and learning a small known MDP.
 
-use crossroads_common::Transition;
 use crossroads_common::config::TargetUpdate;
 use crossroads_learner::optimizer::{Optimizer, OptimizerConfig};
 use crossroads_learner::targets::{double_dqn_targets, taken, weighted_huber};
 use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
 use crossroads_model::NetworkSpec;
+use crossroads_types::Transition;
 use tch::{Kind, Tensor};
 
 use crate::{toy_batch, toy_spec};

@@ -5,9 +5,10 @@
 use std::time::Duration;
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::grpc::{ClientError, ReplayClient};
-use crossroads_common::{Config, RejectReason, Shutdown, TransitionBatch};
+use crossroads_common::{Config, Shutdown};
 use crossroads_replay::{RunningServer, TableImage};
+use crossroads_transport::grpc::{ClientError, ReplayClient};
+use crossroads_types::{RejectReason, TransitionBatch};
 
 use crate::util::{batch, server_config};
 
@@ -134,7 +135,7 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
             |b| {
                 let (enc, offsets, mut data) = b.observations.clone().into_parts();
                 data.truncate(data.len() - 3);
-                b.observations = crossroads_common::ObservationPool::from_parts(enc, offsets, data);
+                b.observations = crossroads_types::ObservationPool::from_parts(enc, offsets, data);
             },
             tonic::Code::InvalidArgument,
             "batch.observations[",
@@ -174,7 +175,7 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
                 let mut fresh = TransitionBatch::new(
                     b.spec.clone(),
                     4,
-                    crossroads_common::ObservationEncoding::DenseF32,
+                    crossroads_types::ObservationEncoding::DenseF32,
                 );
                 let mut v = vec![0.0; crate::util::SPEC_LEN];
                 v[4] = f32::NAN;
@@ -235,7 +236,7 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
                 let mut big = TransitionBatch::new(
                     b.spec.clone(),
                     4,
-                    crossroads_common::ObservationEncoding::DenseF32,
+                    crossroads_types::ObservationEncoding::DenseF32,
                 );
                 for _ in 0..30_000 {
                     big.push_observation(&v);

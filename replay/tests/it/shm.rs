@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::shm::{ShmBatchPublisher, ShmError};
+use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
 
 use crate::util::{SPEC_LEN, batch, obs, server_config, unique_prefix};
 
@@ -60,7 +60,7 @@ fn publisher_child() {
     publisher.send(5, &other).expect("send");
     let acks = publisher.flush(Duration::from_secs(20)).expect("answered");
     assert_eq!(acks.len(), 1);
-    assert_eq!(acks[0].outcome, Err(crossroads_common::RejectReason::Spec));
+    assert_eq!(acks[0].outcome, Err(crossroads_types::RejectReason::Spec));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -170,9 +170,9 @@ fn a_full_queue_fails_the_send_after_its_timeout_instead_of_hanging() {
     config.shm_buffer = 2;
     config.shm_send_timeout_ms = 300;
     // A "server" that subscribes and never reads.
-    let node = crossroads_common::transport::shm::node().expect("node");
-    let service = crossroads_common::transport::shm::open_batch_service(&node, &config, "t")
-        .expect("service");
+    let node = crossroads_transport::shm::node().expect("node");
+    let service =
+        crossroads_transport::shm::open_batch_service(&node, &config, "t").expect("service");
     let stuck = service
         .subscriber_builder()
         .buffer_size(2)

@@ -4,9 +4,10 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use crossroads_common::Shutdown;
 use crossroads_common::config::WeightNormalization;
-use crossroads_common::{RejectReason, Shutdown};
 use crossroads_replay::{PreparedBatch, Table, TableError, TableMetrics};
+use crossroads_types::RejectReason;
 
 use crate::util::{self, insert, obs, prepared, table};
 

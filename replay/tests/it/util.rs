@@ -3,11 +3,10 @@
 use std::time::Duration;
 
 use crossroads_common::config::WeightNormalization;
-use crossroads_common::{
-    Config, ObservationEncoding, ObservationSpec, Shutdown, Transition, TransitionBatch,
-};
+use crossroads_common::{Config, Shutdown};
 use crossroads_replay::rate_limiter::RateLimiterConfig;
 use crossroads_replay::{PreparedBatch, Table, TableConfig, TableMetrics};
+use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 
 pub const SPEC_LEN: usize = 2 * 3 * 2;
 

@@ -8,11 +8,11 @@ use std::process::{Command, ExitCode};
 use std::time::Duration;
 
 use anyhow::Context;
-use crossroads_common::transport::grpc::ReplayClient;
 use crossroads_common::{Config, Shutdown};
 use crossroads_learner::TrainerConfig;
 use crossroads_learner::bench::{FedReport, fed, fill_replay, updates_per_second};
 use crossroads_learner::optimizer::OptimizerConfig;
+use crossroads_transport::grpc::ReplayClient;
 use serde_json::json;
 
 /// What to measure.

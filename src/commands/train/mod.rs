@@ -29,10 +29,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use crossroads_common::transport::grpc::ReplayClient;
 use crossroads_common::{ActorTransport, Config, ConfigLoader, Shutdown};
-use crossroads_learner::LearnerClient;
 use crossroads_sim::{ActionSet, Env, EnvConfig, EvalConfig, Scenario, evaluate};
+use crossroads_transport::LearnerClient;
+use crossroads_transport::grpc::ReplayClient;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use self::procs::{Role, free_port};

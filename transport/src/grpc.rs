@@ -1,22 +1,24 @@
-//! The replay server's gRPC client, as actors and the learner use it.
+//! The replay server's gRPC client, as actors, the learner and the CLI use
+//! it.
 //!
 //! [`ReplayClient`] wraps the generated client: it converts domain batches
-//! to the wire and back (validating what the server sends), bounds every
-//! wait by a timeout, and turns statuses into [`ClientError`]s that say
-//! whether a retry can help. [`InsertStream`] is one streaming insert: send
+//! to the wire and back (validating what the server sends), answers in
+//! domain types ([`Sampled`], [`TableInfo`], [`JoinedActor`],
+//! [`SnapshotWritten`], ...), bounds every wait by a timeout, and turns
+//! statuses into [`ClientError`]s that say whether a retry can help. [`InsertStream`] is one streaming insert: send
 //! batches, receive an acknowledgement per batch once its transitions are in
 //! the table.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
+use crossroads_common::config::TransportConfig;
 use crossroads_proto::v1 as pb;
 use crossroads_proto::v1::replay_client::ReplayClient as PbClient;
+use crossroads_types::batch::{BatchError, RejectReason, TransitionBatch};
 use tokio::sync::mpsc;
 use tonic::transport::{Channel, Endpoint};
 
-use crate::batch::{BatchError, TransitionBatch};
-use crate::config::TransportConfig;
 use crate::wire;
 
 /// Why a replay call failed.
@@ -124,6 +126,102 @@ pub struct InsertAck {
     pub table_size: u64,
 }
 
+/// Size, counters and rate-limiter state of a table, as `Info` reports
+/// them.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TableInfo {
+    /// Table name.
+    pub name: String,
+    /// Items held.
+    pub size: u64,
+    /// Items it can hold.
+    pub capacity: u64,
+    /// Items ever inserted (across restores).
+    pub inserts_total: u64,
+    /// Items ever sampled (across restores).
+    pub samples_total: u64,
+    /// Priorities updated.
+    pub priority_updates_total: u64,
+    /// Updates for keys no longer held.
+    pub ignored_updates_total: u64,
+    /// Rejected inputs by reason, e.g. `observation_length` (reasons
+    /// never seen are left out).
+    pub rejections_total: BTreeMap<String, u64>,
+    /// The rate limiter (the server always reports it).
+    pub rate_limiter: Option<RateLimiterInfo>,
+    /// Bytes of memory the table holds.
+    pub bytes_stored: u64,
+    /// Last snapshot written, Unix milliseconds; 0 if none.
+    pub last_snapshot_unix_ms: i64,
+}
+
+/// A table's rate limiter: its settings and whether it lets calls through.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RateLimiterInfo {
+    /// Inserts before the first sample.
+    pub min_size_to_sample: u64,
+    /// Target samples per insert; 0 turns the ratio off.
+    pub samples_per_insert: f64,
+    /// Allowed drift of the ratio, in samples.
+    pub error_tolerance: f64,
+    /// Whether a sample may proceed now.
+    pub can_sample: bool,
+    /// Whether an insert may proceed now.
+    pub can_insert: bool,
+    /// Samples that had to wait (the server process's).
+    pub sample_waits_total: u64,
+    /// Inserts that had to wait (the server process's).
+    pub insert_waits_total: u64,
+}
+
+/// The index the replay server gave an actor ([`ReplayClient::join_actor`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct JoinedActor {
+    /// The actor's index (the same name gets the same index).
+    pub index: u32,
+    /// Actors that have joined so far, this one included.
+    pub joined: u32,
+}
+
+/// A snapshot the replay server wrote ([`ReplayClient::snapshot`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SnapshotWritten {
+    /// Where.
+    pub path: String,
+    /// Items in it.
+    pub items: u64,
+    /// Its size.
+    pub bytes: u64,
+    /// How long writing it took.
+    pub duration_seconds: f64,
+}
+
+impl From<pb::TableInfo> for TableInfo {
+    fn from(i: pb::TableInfo) -> Self {
+        Self {
+            name: i.name,
+            size: i.size,
+            capacity: i.capacity,
+            inserts_total: i.inserts_total,
+            samples_total: i.samples_total,
+            priority_updates_total: i.priority_updates_total,
+            ignored_updates_total: i.ignored_updates_total,
+            rejections_total: i.rejections_total.into_iter().collect(),
+            rate_limiter: i.rate_limiter.map(|r| RateLimiterInfo {
+                min_size_to_sample: r.min_size_to_sample,
+                samples_per_insert: r.samples_per_insert,
+                error_tolerance: r.error_tolerance,
+                can_sample: r.can_sample,
+                can_insert: r.can_insert,
+                sample_waits_total: r.sample_waits_total,
+                insert_waits_total: r.insert_waits_total,
+            }),
+            bytes_stored: i.bytes_stored,
+            last_snapshot_unix_ms: i.last_snapshot_unix_ms,
+        }
+    }
+}
+
 /// A connection to the replay server, for one table. Cheap to clone
 /// (clones share the HTTP/2 connection).
 #[derive(Debug, Clone)]
@@ -197,7 +295,7 @@ impl ReplayClient {
             .batch
             .ok_or_else(|| {
                 BatchError::new(
-                    crate::batch::RejectReason::BadRequest,
+                    RejectReason::BadRequest,
                     "batch",
                     "missing from the sample response",
                 )
@@ -207,7 +305,7 @@ impl ReplayClient {
         if response.keys.len() != n || response.weights.len() != n || response.priorities.len() != n
         {
             return Err(BatchError::new(
-                crate::batch::RejectReason::LengthMismatch,
+                RejectReason::LengthMismatch,
                 "keys",
                 format!(
                     "{} keys, {} weights, {} priorities for {n} transitions",
@@ -247,32 +345,44 @@ impl ReplayClient {
         })
     }
 
-    /// Size, counters and rate-limiter state of the table, as the wire
-    /// carries them.
-    pub async fn info(&self) -> Result<pb::TableInfo, ClientError> {
+    /// Size, counters and rate-limiter state of the table.
+    pub async fn info(&self) -> Result<TableInfo, ClientError> {
         let mut inner = self.inner.clone();
         let request = pb::InfoRequest {
             table: self.table.clone(),
         };
-        self.bounded(Duration::ZERO, inner.info(request)).await
+        let info = self.bounded(Duration::ZERO, inner.info(request)).await?;
+        Ok(info.into())
     }
 
     /// Asks the server for this actor's index, naming it `name` (see the
     /// `JoinActor` call).
-    pub async fn join_actor(&self, name: &str) -> Result<pb::JoinActorResponse, ClientError> {
+    pub async fn join_actor(&self, name: &str) -> Result<JoinedActor, ClientError> {
         let mut inner = self.inner.clone();
         let request = pb::JoinActorRequest {
             name: name.to_owned(),
         };
-        self.bounded(Duration::ZERO, inner.join_actor(request))
-            .await
+        let r = self
+            .bounded(Duration::ZERO, inner.join_actor(request))
+            .await?;
+        Ok(JoinedActor {
+            index: r.index,
+            joined: r.joined,
+        })
     }
 
     /// Asks the server to write a snapshot now; returns its path and size.
-    pub async fn snapshot(&self) -> Result<pb::SnapshotResponse, ClientError> {
+    pub async fn snapshot(&self) -> Result<SnapshotWritten, ClientError> {
         let mut inner = self.inner.clone();
-        self.bounded(Duration::ZERO, inner.snapshot(pb::SnapshotRequest {}))
-            .await
+        let r = self
+            .bounded(Duration::ZERO, inner.snapshot(pb::SnapshotRequest {}))
+            .await?;
+        Ok(SnapshotWritten {
+            path: r.path,
+            items: r.items,
+            bytes: r.bytes,
+            duration_seconds: r.duration_seconds,
+        })
     }
 
     /// Opens a streaming insert with at most `window` batches in flight

@@ -1,5 +1,7 @@
 //! [`LearnerClient`]: the learner service's client, for `crossroads
-//! checkpoints` and for actors (weights).
+//! checkpoints`, `crossroads train` (status, evaluations) and for actors
+//! (weights). It answers in domain types ([`LearnerStatus`],
+//! [`PublishedWeights`], [`CheckpointSummary`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -7,11 +9,12 @@ use std::time::Duration;
 
 use crossroads_proto::v1 as pb;
 use crossroads_proto::v1::learner_client::LearnerClient as PbClient;
+use crossroads_types::checkpoint::check_checkpoint_id;
 use tonic::transport::{Channel, Endpoint};
 
-use crate::broadcast::PublishedWeights;
-use crate::checkpoint::validate_id;
-use crate::convert::{CheckpointSummary, checkpoint_from_wire, weights_from_wire};
+use crate::convert::{
+    CheckpointSummary, PublishedWeights, checkpoint_from_wire, weights_from_wire,
+};
 
 /// Why a learner call failed.
 #[derive(Debug, thiserror::Error)]
@@ -70,7 +73,43 @@ impl From<tonic::Status> for LearnerClientError {
 }
 
 /// Where training stands, as `Status` reports it.
-pub type LearnerStatus = pb::LearnerStatus;
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LearnerStatus {
+    /// Updates applied.
+    pub update_step: u64,
+    /// Latest published version.
+    pub weights_version: u64,
+    /// Latest loss.
+    pub loss: f64,
+    /// Latest mean Q.
+    pub mean_q: f64,
+    /// Updates per second over the last few seconds.
+    pub updates_per_second: f64,
+    /// Seconds since the learner started.
+    pub uptime_seconds: f64,
+    /// Scenario of the run.
+    pub scenario: String,
+    /// Latest checkpoint id; empty if none.
+    pub latest_checkpoint: String,
+    /// The effective configuration, as TOML (secrets redacted).
+    pub config_toml: String,
+}
+
+impl From<pb::LearnerStatus> for LearnerStatus {
+    fn from(s: pb::LearnerStatus) -> Self {
+        Self {
+            update_step: s.update_step,
+            weights_version: s.weights_version,
+            loss: s.loss,
+            mean_q: s.mean_q,
+            updates_per_second: s.updates_per_second,
+            uptime_seconds: s.uptime_seconds,
+            scenario: s.scenario,
+            latest_checkpoint: s.latest_checkpoint,
+            config_toml: s.config_toml,
+        }
+    }
+}
 
 /// A connection to a learner. Cheap to clone.
 #[derive(Debug, Clone)]
@@ -180,8 +219,10 @@ impl LearnerClient {
     /// Where training stands.
     pub async fn status(&self) -> Result<LearnerStatus, LearnerClientError> {
         let mut c = self.inner.clone();
-        self.bounded(c.status(self.request(pb::StatusRequest {})?))
-            .await
+        let status = self
+            .bounded(c.status(self.request(pb::StatusRequest {})?))
+            .await?;
+        Ok(status.into())
     }
 
     /// Reports an evaluation of a weights version.
@@ -256,7 +297,9 @@ impl LearnerClient {
                 .info
                 .ok_or_else(|| LearnerClientError::Invalid("first chunk has no info".into()))?,
         );
-        validate_id(&info.id).map_err(|e| LearnerClientError::Invalid(e.to_string()))?;
+        check_checkpoint_id(&info.id).map_err(|problem| {
+            LearnerClientError::Invalid(format!("invalid checkpoint id {:?}: {problem}", info.id))
+        })?;
         std::fs::create_dir_all(out).map_err(io("creating", out))?;
         let tmp = out.join(format!(".pull-{}-{}", info.id, std::process::id()));
         let dest = out.join(&info.id);
@@ -264,7 +307,7 @@ impl LearnerClient {
         let result = async {
             let mut files: BTreeMap<String, (std::fs::File, u64, bool)> = BTreeMap::new();
             while let Some(chunk) = next_chunk(&mut stream, self.timeout).await? {
-                if validate_id(&chunk.file).is_err() || !info.files.contains(&chunk.file) {
+                if check_checkpoint_id(&chunk.file).is_err() || !info.files.contains(&chunk.file) {
                     return Err(LearnerClientError::Invalid(format!(
                         "unexpected file name {:?}",
                         chunk.file

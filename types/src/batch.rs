@@ -2,8 +2,8 @@
 //! an observation pool that holds each observation once.
 //!
 //! [`TransitionBatch`] is what actors build ([`TransitionBatch::push`]),
-//! transports carry (converted to the wire in [`crate::wire`] and
-//! [`crate::transport::shm`]) and the replay server stores. Its
+//! transports carry (converted to the wire in `crossroads_transport::wire`
+//! and `crossroads_transport::shm`) and the replay server stores. Its
 //! [`TransitionBatch::validate`] is the one check applied at every boundary;
 //! a [`BatchError`] names the offending field and carries a
 //! [`RejectReason`] for counters.

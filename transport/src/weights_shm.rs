@@ -12,12 +12,13 @@
 use std::fmt;
 
 use crossroads_common::config::TransportConfig;
-use crossroads_common::transport::shm::{ShmError, node};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+
+use crate::shm::{ShmError, node};
 
 /// `CRW1`, little-endian: marks a weights frame.
 pub const WEIGHTS_MAGIC: u32 = u32::from_le_bytes(*b"CRW1");

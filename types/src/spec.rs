@@ -4,7 +4,16 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::ModelError;
+/// Why a network spec, or the metadata of a weights file, is not valid.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SpecError {
+    /// A dimension, observation kind, action set or trunk is invalid.
+    #[error("invalid network spec: {0}")]
+    Invalid(String),
+    /// The metadata is not that of a weights file of this format.
+    #[error("invalid weights file: {0}")]
+    Format(String),
+}
 
 /// Dense features after the grid in every simulator observation (the ego's
 /// own state; `crossroads_sim::EGO_FEATURES`).
@@ -39,14 +48,14 @@ impl ObservationLayout {
     /// Sequential grid 6 x 5 x 11 (plus time to collision); `-occlusion`
     /// adds an occluded channel. Each is followed by [`EGO_FEATURES`]
     /// values.
-    pub fn named(kind: &str) -> Result<Self, ModelError> {
+    pub fn named(kind: &str) -> Result<Self, SpecError> {
         let (channels, rows, cols) = match kind {
             "ttg" => (5, 18, 26),
             "ttg-occlusion" => (6, 18, 26),
             "sequential" => (6, 5, 11),
             "sequential-occlusion" => (7, 5, 11),
             other => {
-                return Err(ModelError::Spec(format!(
+                return Err(SpecError::Invalid(format!(
                     "unknown observation kind {other:?}; expected one of {}",
                     Self::KINDS.join(", ")
                 )));
@@ -78,12 +87,12 @@ impl ObservationLayout {
 }
 
 /// Number of actions of an action set: `ttg` 5, `sequential` 12, `creep` 3.
-pub fn num_actions_of(action_set: &str) -> Result<i64, ModelError> {
+pub fn num_actions_of(action_set: &str) -> Result<i64, SpecError> {
     match action_set {
         "ttg" => Ok(5),
         "sequential" => Ok(12),
         "creep" => Ok(3),
-        other => Err(ModelError::Spec(format!(
+        other => Err(SpecError::Invalid(format!(
             "unknown action set {other:?}; expected ttg, sequential or creep"
         ))),
     }
@@ -112,11 +121,11 @@ impl TrunkKind {
     }
 
     /// Parses `mlp` or `conv`.
-    pub fn parse(s: &str) -> Result<Self, ModelError> {
+    pub fn parse(s: &str) -> Result<Self, SpecError> {
         match s {
             "mlp" => Ok(TrunkKind::Mlp),
             "conv" => Ok(TrunkKind::Conv),
-            other => Err(ModelError::Spec(format!(
+            other => Err(SpecError::Invalid(format!(
                 "unknown trunk {other:?}; expected mlp or conv"
             ))),
         }
@@ -148,7 +157,7 @@ impl NetworkSpec {
         action_set: &str,
         trunk: TrunkKind,
         hidden: Vec<i64>,
-    ) -> Result<Self, ModelError> {
+    ) -> Result<Self, SpecError> {
         let spec = Self {
             observation: ObservationLayout::named(observation)?,
             action_set: action_set.to_owned(),
@@ -161,27 +170,27 @@ impl NetworkSpec {
     }
 
     /// Checks that every dimension is positive and fits the trunk.
-    pub fn validate(&self) -> Result<(), ModelError> {
+    pub fn validate(&self) -> Result<(), SpecError> {
         let o = &self.observation;
         if o.channels <= 0 || o.rows <= 0 || o.cols <= 0 || o.extra < 0 {
-            return Err(ModelError::Spec(format!(
+            return Err(SpecError::Invalid(format!(
                 "observation dimensions must be positive: {o:?}"
             )));
         }
         if self.num_actions <= 0 {
-            return Err(ModelError::Spec(format!(
+            return Err(SpecError::Invalid(format!(
                 "num_actions must be positive, got {}",
                 self.num_actions
             )));
         }
         if let Some(h) = self.hidden.iter().find(|&&h| h <= 0 || h > 1 << 16) {
-            return Err(ModelError::Spec(format!(
+            return Err(SpecError::Invalid(format!(
                 "hidden sizes must be between 1 and 65536, got {h} in {:?}",
                 self.hidden
             )));
         }
         if self.trunk == TrunkKind::Conv && self.hidden.len() < 2 {
-            return Err(ModelError::Spec(format!(
+            return Err(SpecError::Invalid(format!(
                 "a conv trunk needs at least one convolution's channels and the fully connected width, got {:?}",
                 self.hidden
             )));

@@ -5,7 +5,7 @@
 //! `<prefix>/replay/<table>/insert` ([`service_name`]): the `#[repr(C)]`
 //! user header [`BatchFrameHeader`] and a `[u8]` payload holding the
 //! batch's columns followed by its observation pool, encoded by
-//! [`crate::codec`] exactly as on gRPC ([`write_frame`], [`read_frame`]).
+//! `crossroads_types::codec` exactly as on gRPC ([`write_frame`], [`read_frame`]).
 //! Both sides open the service with [`open_batch_service`], so its settings
 //! are defined once. The server answers every batch on
 //! `<prefix>/replay/<table>/acks` ([`open_ack_service`]) with a
@@ -28,9 +28,11 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
-use crate::batch::{BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch};
-use crate::codec::ObservationEncoding;
-use crate::config::TransportConfig;
+use crossroads_common::config::TransportConfig;
+use crossroads_types::batch::{
+    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch,
+};
+use crossroads_types::codec::ObservationEncoding;
 
 /// `CRB1`, little-endian: marks a frame of this format.
 pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"CRB1");
@@ -659,7 +661,7 @@ impl ShmBatchPublisher {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::batch::Transition;
+    use crossroads_types::batch::Transition;
 
     #[test]
     fn ack_round_trip() {

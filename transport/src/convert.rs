@@ -1,11 +1,26 @@
-//! Conversion between the learner's domain types and `crossroads_proto`,
-//! validating what comes in.
+//! The learner's conversations in domain types, and their conversion to
+//! and from `crossroads_proto`, validating what comes in: network specs,
+//! weights ([`PublishedWeights`]) and checkpoint descriptions
+//! ([`CheckpointSummary`]).
 
-use crossroads_model::{NetworkSpec, ObservationLayout, TrunkKind};
 use crossroads_proto::v1 as pb;
+use crossroads_types::{NetworkSpec, ObservationLayout, TrunkKind, WeightsMeta};
 
-use crate::broadcast::PublishedWeights;
-use crate::checkpoint::CheckpointEntry;
+/// One published version of the online network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PublishedWeights {
+    /// Strictly increasing over the learner's life, across restores and
+    /// restarts.
+    pub version: u64,
+    /// Update step the weights come from.
+    pub update_step: u64,
+    /// The network.
+    pub spec: NetworkSpec,
+    /// safetensors bytes (with the spec and version in their metadata).
+    pub safetensors: Vec<u8>,
+    /// Unix milliseconds of publication.
+    pub published_unix_ms: i64,
+}
 
 /// A checkpoint as the API describes it.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,22 +43,6 @@ pub struct CheckpointSummary {
     pub best: bool,
     /// Its files.
     pub files: Vec<String>,
-}
-
-impl From<&CheckpointEntry> for CheckpointSummary {
-    fn from(e: &CheckpointEntry) -> Self {
-        Self {
-            id: e.manifest.id.clone(),
-            update_step: e.manifest.update_step,
-            weights_version: e.manifest.weights_version,
-            created_unix_ms: e.manifest.created_unix_ms,
-            size_bytes: e.size_bytes,
-            scenario: e.manifest.scenario.clone(),
-            eval_metrics: e.manifest.eval_metrics.clone(),
-            best: e.best,
-            files: e.files(),
-        }
-    }
 }
 
 /// To the wire.
@@ -134,13 +133,12 @@ pub fn weights_to_wire(w: &PublishedWeights) -> pb::Weights {
 }
 
 /// Weights from the wire, checked: a valid spec, the same spec and version
-/// in the safetensors metadata as in the message.
+/// in the safetensors metadata as in the message. Reads the safetensors
+/// header only; the tensors are checked where they are loaded
+/// (`crossroads_model::QNetwork::load_safetensors`).
 pub fn weights_from_wire(w: pb::Weights) -> Result<PublishedWeights, String> {
     let spec = spec_from_wire(w.spec.ok_or("weights.spec is missing")?)?;
-    let (metadata, _) =
-        crossroads_model::weights::decode(&w.safetensors).map_err(|e| e.to_string())?;
-    let meta =
-        crossroads_model::WeightsMeta::from_metadata(&metadata).map_err(|e| e.to_string())?;
+    let meta = WeightsMeta::read(&w.safetensors).map_err(|e| e.to_string())?;
     if meta.spec != spec || meta.version != w.version {
         return Err(format!(
             "the message says version {} of {spec:?}, its safetensors version {} of {:?}",

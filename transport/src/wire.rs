@@ -1,11 +1,13 @@
-//! Conversion between the wire (`crossroads_proto::v1`) and the domain
-//! ([`crate::batch`]), validating at the boundary: a wire batch becomes a
-//! [`TransitionBatch`] only if [`TransitionBatch::validate`] accepts it.
+//! Conversion of transition batches between the wire
+//! (`crossroads_proto::v1`) and the domain (`crossroads_types::batch`),
+//! validating at the boundary: a wire batch becomes a [`TransitionBatch`]
+//! only if [`TransitionBatch::validate`] accepts it.
 
 use crossroads_proto::v1 as pb;
-
-use crate::batch::{BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch};
-use crate::codec::ObservationEncoding;
+use crossroads_types::batch::{
+    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch,
+};
+use crossroads_types::codec::ObservationEncoding;
 
 /// A wire batch as a validated domain batch. Errors name the field as the
 /// wire calls it (`rewards[3]`, `observations.encoding`, ...).
@@ -77,7 +79,7 @@ pub fn batch_to_wire(batch: TransitionBatch) -> pb::TransitionBatch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::batch::Transition;
+    use crossroads_types::batch::Transition;
 
     #[test]
     fn round_trip_and_boundary_errors() {

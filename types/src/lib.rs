@@ -1,0 +1,35 @@
+//! The domain vocabulary of crossroads: the values every role and transport
+//! speaks about, as plain Rust data.
+//!
+//! - [`batch`]: the [`TransitionBatch`] (struct-of-arrays n-step
+//!   transitions over an [`ObservationPool`] that holds each observation
+//!   once) and its validation, whose [`BatchError`] names the field.
+//! - [`codec`]: the observation codec (dense f32 or sparse cells), the same
+//!   bytes on gRPC and in shared memory.
+//! - [`spec`]: what a Q-network is ([`NetworkSpec`]: the
+//!   [`ObservationLayout`] it reads, the action set it scores, its
+//!   [`TrunkKind`]).
+//! - [`weights`]: the metadata of a weights file ([`WeightsMeta`]), read
+//!   from the safetensors header without building a tensor.
+//! - [`checkpoint`]: which names a checkpoint may have.
+//!
+//! Invariant, enforced by the crate graph: this crate depends on no tensor
+//! library (tch), no RPC framework (tonic) and no wire format (prost), so
+//! any crate can use the domain types without pulling those in; conversions
+//! to the wire live in `crossroads_transport`, tensors in
+//! `crossroads_model`.
+
+pub mod batch;
+pub mod checkpoint;
+pub mod codec;
+pub mod spec;
+pub mod weights;
+
+pub use batch::{
+    BatchError, ObservationPool, ObservationSpec, RejectReason, Transition, TransitionBatch,
+};
+pub use codec::ObservationEncoding;
+pub use spec::{
+    EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
+};
+pub use weights::WeightsMeta;
