@@ -295,8 +295,8 @@ mod tests {
 
     #[test]
     fn an_ensemble_of_different_networks_is_refused_naming_the_member() {
-        let other = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8, 4])
-            .and_then(|s| QNetwork::new(s, 3))
+        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8, 4]).expect("spec");
+        let other = QNetwork::new(spec, 3)
             .and_then(|n| n.to_safetensors(1))
             .expect("network");
         let err = NetworkPolicy::ensemble(&[&weights(1), &other], "mixed".into())

@@ -251,8 +251,18 @@ fn markdown(plan: &Plan, r: &Results) -> String {
          Time is the mean time to the goal of successful trials; brake is traffic's \
          brake-light seconds per trial by SUMO's rule (cars within 100 m of the junction; \
          the paper does not define its measure, see reports/sumo/NOTES.md). DQN cells evaluate each run's \
-         `best/` weights (chosen on the run's own periodic evaluations, train.eval_trials trials of another seed).\n",
-        r.started, r.machine, r.trials, r.seed, r.minutes
+         `best/` weights (chosen on the run's own periodic evaluations, train.eval_trials trials of another seed){}.\n",
+        r.started,
+        r.machine,
+        r.trials,
+        r.seed,
+        r.minutes,
+        if r.runs.iter().any(|run| run.experiment.contains("-seed")) {
+            "; an experiment trained from several seeds (`<experiment>-seed<k>` runs) acts on \
+             the mean of its networks' Q-values (see the training section)"
+        } else {
+            ""
+        }
     );
     if plan.wants(Part::Table1) {
         table1_md(w, r);
