@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};
 
 use anyhow::Context;
-use crossroads_model::QNetwork;
+use crossroads_model::{QNetwork, WeightsMeta};
 use crossroads_sim::{ActionSet, Env, Policy, PolicyRng, SimError};
 
 /// Greedy policy of a Q-network. `act` runs one forward pass for the whole
@@ -78,8 +78,10 @@ impl NetworkPolicy {
                 sum.iter_mut().zip(&q.q).for_each(|(s, v)| *s += v);
             }
         }
-        let k = members.len() as f32;
-        sum.iter_mut().for_each(|s| *s /= k);
+        if members.len() > 1 {
+            let k = members.len() as f32;
+            sum.iter_mut().for_each(|s| *s /= k);
+        }
         Ok(sum)
     }
 
@@ -209,8 +211,10 @@ fn read_weights(path: &Path, run_label: bool) -> anyhow::Result<Option<(Vec<u8>,
         return Ok(None);
     };
     let bytes = std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?;
-    let (_, version) = QNetwork::from_safetensors(&bytes)
-        .with_context(|| format!("{} holds no network weights", file.display()))?;
+    // The header only: the networks are built once, per thread, later.
+    let version = WeightsMeta::read(&bytes)
+        .with_context(|| format!("{} holds no network weights", file.display()))?
+        .version;
     let label = if file.file_name().is_some_and(|n| n == "weights.safetensors") {
         if run_label {
             folder_label(path)

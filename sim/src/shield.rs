@@ -500,7 +500,7 @@ mod tests {
 
     /// The shield's verdict under the assumptions `spec` (`--shield`'s).
     fn verdict_under(env: &Env, spec: &str) -> Option<Threat> {
-        let p = ShieldParams::parse(spec).unwrap();
+        let p = ShieldParams::parse(spec).expect("the test's assumptions parse");
         let mut cars = Vec::new();
         sense(env, &p, &mut cars);
         check_go(env, &cars, &p)
