@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
-use crossroads_common::ConfigLoader;
+use crossroads_config::ConfigLoader;
 use crossroads_sim::ActionSet;
 
 /// Learns to drive through unsignalized and occluded intersections with

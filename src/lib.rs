@@ -2,7 +2,7 @@
 //! one container image serves every role.
 //!
 //! [`cli::Cli`] is the clap definition; [`run`] loads the layered
-//! configuration ([`crossroads_common::ConfigLoader`]), starts tracing and
+//! configuration ([`crossroads_config::ConfigLoader`]), starts tracing and
 //! dispatches to the subcommand's module under [`commands`].
 
 pub mod cli;

@@ -20,7 +20,7 @@
 //! [`WeightsSubscription`] receives the learner's weights (gRPC stream or
 //! iceoryx2) into a [`WeightsSlot`]; a [`LiveNetwork`] applies the newest
 //! between steps. Configuration:
-//! the `[actor]` section ([`crossroads_common::ActorConfig`]) through
+//! the `[actor]` section ([`crossroads_config::ActorConfig`]) through
 //! [`ActorSettings::from_config`] and [`resolve_index`].
 
 mod actor;

@@ -15,8 +15,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crossroads_common::config::TransportConfig;
-use crossroads_common::{ActorTransport, Backoff, Shutdown};
+use crossroads_config::TransportConfig;
+use crossroads_config::ActorTransport;
+use crossroads_common::{Backoff, Shutdown};
 use crossroads_transport::grpc::{ClientError, InsertStream, ReplayClient};
 use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
 use crossroads_types::TransitionBatch;
@@ -42,7 +43,7 @@ pub struct PushConfig {
 
 impl PushConfig {
     /// From the `[actor]`, `[transport]` and `[replay]` sections.
-    pub fn from_config(config: &crossroads_common::Config) -> Self {
+    pub fn from_config(config: &crossroads_config::Config) -> Self {
         Self {
             transport: config.actor.transport,
             connection: config.transport.clone(),

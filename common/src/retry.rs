@@ -33,7 +33,7 @@ impl Backoff {
     }
 
     /// From the `[transport]` section's backoff keys.
-    pub fn from_config(config: &crate::config::TransportConfig) -> Self {
+    pub fn from_config(config: &crossroads_config::TransportConfig) -> Self {
         Self::new(
             Duration::from_millis(config.initial_backoff_ms),
             Duration::from_millis(config.max_backoff_ms),

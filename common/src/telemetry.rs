@@ -7,7 +7,7 @@ use tracing_subscriber::EnvFilter;
 use tracing_subscriber::fmt;
 use tracing_subscriber::prelude::*;
 
-use crate::config::LogFormat;
+use crossroads_config::LogFormat;
 
 /// Why tracing could not start.
 #[derive(Debug, thiserror::Error)]

@@ -4,7 +4,7 @@
 //! tensors. `crossroads bench learner` adds the gRPC-fed run and PyTorch.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use crossroads_common::LearnerConfig;
+use crossroads_config::LearnerConfig;
 use crossroads_learner::bench::{SplitMix, synthetic_batch};
 use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
 

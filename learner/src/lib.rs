@@ -21,7 +21,7 @@
 //! second and the time spent waiting for samples.
 //!
 //! The whole configuration is the `[learner]` section
-//! ([`crossroads_common::LearnerConfig`]).
+//! ([`crossroads_config::LearnerConfig`]).
 
 pub mod batch;
 pub mod bench;

@@ -9,7 +9,7 @@
 
 use std::collections::HashMap;
 
-use crossroads_common::config::{LearnerConfig, OptimizerKind};
+use crossroads_config::{LearnerConfig, OptimizerKind};
 use crossroads_model::ModelError;
 use tch::Tensor;
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use crossroads_common::config::LearnerConfig;
+use crossroads_config::LearnerConfig;
 use crossroads_common::{Backoff, Shutdown};
 use crossroads_model::NetworkSpec;
 use crossroads_transport::grpc::ReplayClient;

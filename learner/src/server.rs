@@ -13,7 +13,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_common::{Backoff, Config, Shutdown};
+use crossroads_config::Config;
+use crossroads_common::{Backoff, Shutdown};
 use crossroads_proto::v1::learner_server::LearnerServer;
 use crossroads_transport::grpc::ReplayClient;
 use parking_lot::Mutex;

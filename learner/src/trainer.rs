@@ -1,7 +1,7 @@
 //! [`Trainer`]: the online and target networks and the optimizer, and
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
 
-use crossroads_common::config::{LearnerConfig, TargetUpdate, Trunk};
+use crossroads_config::{LearnerConfig, TargetUpdate, Trunk};
 use crossroads_model::{ModelError, NetworkSpec, QNetwork, TrunkKind};
 use tch::{Kind, Tensor};
 

@@ -8,7 +8,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_common::{Config, Shutdown};
+use crossroads_config::Config;
+use crossroads_common::Shutdown;
 use crossroads_transport::convert::PublishedWeights;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 use parking_lot::Mutex;

@@ -20,7 +20,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use crossroads_transport::shm::{self, ShmError};
 use crossroads_types::batch::{BatchError, RejectReason};
 

@@ -19,7 +19,7 @@
 use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
-use crossroads_common::config::{ReplayConfig, WeightNormalization};
+use crossroads_config::{ReplayConfig, WeightNormalization};
 use crossroads_types::ObservationEncoding;
 use crossroads_types::batch::{
     BatchError, MAX_OBSERVATION_LEN, ObservationPool, ObservationSpec, RejectReason,

@@ -8,7 +8,7 @@ use crossroads_actor::{
     Actor, ActorMetrics, ActorSettings, LiveNetwork, Mode, PushConfig, Pusher, WeightsSlot,
     WeightsSubscription, resolve_index,
 };
-use crossroads_common::Config;
+use crossroads_config::Config;
 use crossroads_model::QNetwork;
 
 use super::role::{Role, block_on};

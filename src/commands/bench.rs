@@ -3,7 +3,7 @@
 use std::process::ExitCode;
 use std::time::Duration;
 
-use crossroads_common::Config;
+use crossroads_config::Config;
 use crossroads_sim::bench_builtin;
 
 use crate::cli::{BenchArgs, BenchTarget};

@@ -2,7 +2,7 @@
 
 use std::process::ExitCode;
 
-use crossroads_common::Config;
+use crossroads_config::Config;
 
 use crate::cli::{ConfigAction, ConfigArgs, GlobalArgs};
 

@@ -3,7 +3,7 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
-use crossroads_common::Config;
+use crossroads_config::Config;
 use crossroads_model::{DuelingMlp, MlpSpec};
 use serde::Serialize;
 use tch::{Device, Kind, Tensor, nn};

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
-use crossroads_common::Config;
+use crossroads_config::Config;
 
 use crate::cli::HealthArgs;
 

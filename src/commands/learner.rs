@@ -3,7 +3,7 @@
 use std::process::ExitCode;
 
 use anyhow::Context;
-use crossroads_common::Config;
+use crossroads_config::Config;
 
 use super::role::{Role, block_on};
 

@@ -6,7 +6,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use crossroads_common::metrics::registry;
-use crossroads_common::{Config, MetricsServer, Shutdown};
+use crossroads_config::Config;
+use crossroads_common::{MetricsServer, Shutdown};
 use prometheus::Registry;
 
 /// Runs `serve` on a multi-threaded runtime of `runtime.worker_threads`.

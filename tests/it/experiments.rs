@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use crossroads_common::ConfigLoader;
+use crossroads_config::ConfigLoader;
 use crossroads_sim::{ActionSet, Env, EnvConfig, Scenario};
 
 #[test]

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
 
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use crossroads_transport::grpc::ReplayClient;
 
 /// Starts `crossroads <args>` and returns it with the `addr=` of the log
@@ -71,7 +71,7 @@ fn checkpoints(learner: &str, args: &[&str]) -> Output {
         .expect("run crossroads checkpoints")
 }
 
-fn fill(replay: &str, config: &crossroads_common::LearnerConfig) {
+fn fill(replay: &str, config: &crossroads_config::LearnerConfig) {
     let transport = TransportConfig {
         replay_endpoint: format!("http://{replay}"),
         ..TransportConfig::default()
@@ -125,7 +125,7 @@ fn learner_and_checkpoints_commands_work_together() {
         ],
         "replay server listening",
     );
-    let config = crossroads_common::LearnerConfig {
+    let config = crossroads_config::LearnerConfig {
         observation: "sequential".to_owned(),
         hidden: vec![32],
         ..Default::default()

@@ -5,7 +5,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 

@@ -12,7 +12,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use crossroads_proto::v1 as pb;
 use crossroads_proto::v1::replay_client::ReplayClient as PbClient;
 use crossroads_types::batch::{BatchError, RejectReason, TransitionBatch};

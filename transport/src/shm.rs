@@ -28,7 +28,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use crossroads_types::batch::{
     BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch,
 };

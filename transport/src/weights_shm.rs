@@ -11,7 +11,7 @@
 
 use std::fmt;
 
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;

@@ -2,7 +2,8 @@
 //! per step, the epsilon ladder from the config, greedy evaluation.
 
 use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
-use crossroads_common::{ActorConfig, ConfigLoader, Shutdown};
+use crossroads_config::{ActorConfig, ConfigLoader};
+use crossroads_common::Shutdown;
 use crossroads_sim::Outcome;
 use crossroads_transport::grpc::ReplayClient;
 
@@ -186,7 +187,7 @@ fn the_index_and_count_come_from_the_config_or_the_environment() {
     assert_eq!((config.actor.index, config.actor.count), (Some(2), 4));
     assert_eq!(
         config.actor.transport,
-        crossroads_common::ActorTransport::Shm
+        crossroads_config::ActorTransport::Shm
     );
     let err = ConfigLoader::new()
         .without_env()

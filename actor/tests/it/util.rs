@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use crossroads_actor::{ActionValues, Actor, ActorMetrics, ActorSettings, ValuesError};
-use crossroads_common::config::TransportConfig;
-use crossroads_common::{ActorConfig, Config};
+use crossroads_config::TransportConfig;
+use crossroads_config::{ActorConfig, Config};
 use crossroads_types::TransitionBatch;
 
 /// Q(s, a) = bias[a] + scale[a] * sum(s): cheap, deterministic, and

@@ -11,7 +11,8 @@ use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, LiveNetwork, PushConfig, Pusher, RunReport,
     WeightsSlot, WeightsSubscription, WeightsUpdate,
 };
-use crossroads_common::{ActorTransport, Config, Shutdown};
+use crossroads_config::{ActorTransport, Config};
+use crossroads_common::Shutdown;
 use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 

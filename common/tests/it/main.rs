@@ -1,5 +1,4 @@
 //! Integration tests of crossroads-common, one binary.
 
-mod config;
 mod metrics;
 mod shutdown;

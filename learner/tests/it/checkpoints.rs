@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use crossroads_common::config::TargetUpdate;
+use crossroads_config::TargetUpdate;
 use crossroads_learner::bench::{SplitMix, synthetic_batch};
 use crossroads_learner::checkpoint::{CheckpointStore, NewCheckpoint, StoreError, validate_id};
 use crossroads_learner::optimizer::OptimizerConfig;

@@ -60,8 +60,8 @@ fn learner_weights_load_in_python_safetensors() {
         return;
     }
 
-    let config = crossroads_common::LearnerConfig {
-        trunk: crossroads_common::config::Trunk::Conv,
+    let config = crossroads_config::LearnerConfig {
+        trunk: crossroads_config::Trunk::Conv,
         hidden: vec![8, 16, 64],
         ..Default::default()
     };

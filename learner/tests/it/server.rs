@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use crossroads_common::Config;
+use crossroads_config::Config;
 use crossroads_common::Shutdown;
 use crossroads_learner::bench::fill_replay;
 use crossroads_learner::{RunningLearner, TrainerConfig};
@@ -300,7 +300,7 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
 #[test]
 fn weights_reach_a_late_shared_memory_subscriber() {
     use crossroads_transport::weights_shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
-    let transport = crossroads_common::TransportConfig {
+    let transport = crossroads_config::TransportConfig {
         shm_prefix: format!("crossroads-test-{}-weights", std::process::id()),
         ..Default::default()
     };

@@ -1,6 +1,6 @@
 //! The update: targets, loss, optimizers, and learning a small known MDP.
 
-use crossroads_common::config::TargetUpdate;
+use crossroads_config::TargetUpdate;
 use crossroads_learner::optimizer::{Optimizer, OptimizerConfig};
 use crossroads_learner::targets::{double_dqn_targets, taken, weighted_huber};
 use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
@@ -355,7 +355,7 @@ fn bandit_q(p: f64, huber_delta: f64) -> (f32, f32) {
 
 #[test]
 fn the_default_loss_learns_the_mean_return_of_a_risky_go() {
-    let delta = crossroads_common::config::LearnerConfig::default().huber_delta;
+    let delta = crossroads_config::LearnerConfig::default().huber_delta;
     // Break-even: 1 - 11 p = TIMEOUT_RETURN at p = 0.177.
     for p in [0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.5] {
         let (go, wait) = bandit_q(p, delta);

@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
-use crossroads_common::config::TransportConfig;
+use crossroads_config::TransportConfig;
 use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
 
 use crate::util::{SPEC_LEN, batch, obs, server_config, unique_prefix};

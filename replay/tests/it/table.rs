@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crossroads_common::Shutdown;
-use crossroads_common::config::WeightNormalization;
+use crossroads_config::WeightNormalization;
 use crossroads_replay::{PreparedBatch, Table, TableError, TableMetrics};
 use crossroads_types::RejectReason;
 

@@ -17,7 +17,8 @@ use anyhow::Context;
 use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, PushConfig, Pusher, hostname,
 };
-use crossroads_common::{ActorTransport, Config, Shutdown};
+use crossroads_config::{ActorTransport, Config};
+use crossroads_common::Shutdown;
 use crossroads_learner::bench::median;
 use crossroads_model::QNetwork;
 use crossroads_replay::{PreparedBatch, Table};

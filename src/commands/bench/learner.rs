@@ -8,7 +8,8 @@ use std::process::{Command, ExitCode};
 use std::time::Duration;
 
 use anyhow::Context;
-use crossroads_common::{Config, Shutdown};
+use crossroads_config::Config;
+use crossroads_common::Shutdown;
 use crossroads_learner::TrainerConfig;
 use crossroads_learner::bench::{FedReport, fed, fill_replay, updates_per_second};
 use crossroads_learner::optimizer::OptimizerConfig;

@@ -29,7 +29,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use crossroads_common::{ActorTransport, Config, ConfigLoader, Shutdown};
+use crossroads_config::{ActorTransport, Config, ConfigLoader};
+use crossroads_common::Shutdown;
 use crossroads_sim::{ActionSet, Env, EnvConfig, EvalConfig, Scenario, evaluate};
 use crossroads_transport::LearnerClient;
 use crossroads_transport::grpc::ReplayClient;

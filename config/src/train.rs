@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Checks;
+
 use super::ActorTransport;
 
 /// `crossroads train`: the replay, the learner and `actors` actor processes
@@ -71,13 +73,8 @@ impl Default for TrainConfig {
 impl TrainConfig {
     /// Range checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
-        let mut problems = Vec::new();
-        let mut check = |ok: bool, key: &str, problem: String| {
-            if !ok {
-                problems.push((format!("train.{key}"), problem));
-            }
-        };
-        check(
+        let mut problems = Checks::new("train");
+        problems.check(
             (1..=256).contains(&self.actors),
             "actors",
             format!("must be between 1 and 256, got {}", self.actors),
@@ -87,19 +84,19 @@ impl TrainConfig {
             ("eval_trials", self.eval_trials),
             ("confirm_trials", self.confirm_trials),
         ] {
-            check(v >= 1, key, "must be at least 1".to_owned());
+            problems.check(v >= 1, key, "must be at least 1".to_owned());
         }
         for (key, v) in [
             ("target_success", self.target_success),
             ("target_collision", self.target_collision),
         ] {
-            check(
+            problems.check(
                 (0.0..=1.0).contains(&v),
                 key,
                 format!("must be a fraction in [0, 1], got {v}"),
             );
         }
-        check(
+        problems.check(
             self.eval_share > 0.0 && self.eval_share <= 1.0,
             "eval_share",
             format!("must be in (0, 1], got {}", self.eval_share),
@@ -108,13 +105,13 @@ impl TrainConfig {
             ("target_time_s", self.target_time_s),
             ("max_minutes", self.max_minutes),
         ] {
-            check(
+            problems.check(
                 v >= 0.0 && v.is_finite(),
                 key,
                 format!("must be finite and at least 0, got {v}"),
             );
         }
-        problems
+        problems.into_vec()
     }
 
     /// Whether an evaluation meets the target (never when it is off).

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{ACTION_SETS, one_of};
+use super::{ACTION_SETS, Checks};
 
 /// How an actor sends its batches to the replay server.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -129,74 +129,68 @@ impl ActorConfig {
 
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
-        let mut problems = Vec::new();
-        let mut check = |ok: bool, key: &str, problem: String| {
-            if !ok {
-                problems.push((format!("actor.{key}"), problem));
-            }
-        };
-        check(
+        let mut problems = Checks::new("actor");
+        problems.check(
             !self.scenario.is_empty(),
             "scenario",
             "must name a scenario".to_owned(),
         );
-        let (ok, why) = one_of(&self.action_set, &ACTION_SETS);
-        check(ok, "action_set", why);
-        check(
+        problems.one_of("action_set", &self.action_set, &ACTION_SETS);
+        problems.check(
             (1..=4096).contains(&self.envs),
             "envs",
             format!("must be between 1 and 4096, got {}", self.envs),
         );
-        check(
+        problems.check(
             (1..=64).contains(&self.n_step),
             "n_step",
             format!("must be between 1 and 64, got {}", self.n_step),
         );
-        check(
+        problems.check(
             self.gamma > 0.0 && self.gamma <= 1.0,
             "gamma",
             format!("must be in (0, 1], got {}", self.gamma),
         );
         if let Some(r) = self.collision_reward {
-            check(
+            problems.check(
                 r.is_finite() && r <= 0.0,
                 "collision_reward",
                 format!("must be finite and at most 0, got {r}"),
             );
         }
-        check(
+        problems.check(
             (1..=16_384).contains(&self.batch_size),
             "batch_size",
             format!("must be between 1 and 16384, got {}", self.batch_size),
         );
-        check(self.count >= 1, "count", "must be at least 1".to_owned());
+        problems.check(self.count >= 1, "count", "must be at least 1".to_owned());
         if let Some(index) = self.index {
-            check(
+            problems.check(
                 index < self.count,
                 "index",
                 format!("must be below actor.count ({}), got {index}", self.count),
             );
         }
-        check(
+        problems.check(
             (0.0..=1.0).contains(&self.epsilon_base),
             "epsilon_base",
             format!("must be in [0, 1], got {}", self.epsilon_base),
         );
-        check(
+        problems.check(
             self.epsilon_alpha >= 0.0 && self.epsilon_alpha.is_finite(),
             "epsilon_alpha",
             format!("must be finite and at least 0, got {}", self.epsilon_alpha),
         );
-        check(
+        problems.check(
             self.buffer_batches >= 1,
             "buffer_batches",
             "must be at least 1".to_owned(),
         );
-        check(
+        problems.check(
             (1..=1024).contains(&self.in_flight),
             "in_flight",
             format!("must be between 1 and 1024, got {}", self.in_flight),
         );
-        problems
+        problems.into_vec()
     }
 }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::{ACTION_SETS, one_of};
+use super::{ACTION_SETS, Checks};
 
 /// Which optimizer trains the online network.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -203,17 +203,10 @@ impl LearnerConfig {
 
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
-        let mut problems = Vec::new();
-        let mut check = |ok: bool, key: &str, problem: String| {
-            if !ok {
-                problems.push((format!("learner.{key}"), problem));
-            }
-        };
-        let (ok, why) = one_of(&self.observation, &OBSERVATIONS);
-        check(ok, "observation", why);
-        let (ok, why) = one_of(&self.action_set, &ACTION_SETS);
-        check(ok, "action_set", why);
-        check(
+        let mut problems = Checks::new("learner");
+        problems.one_of("observation", &self.observation, &OBSERVATIONS);
+        problems.one_of("action_set", &self.action_set, &ACTION_SETS);
+        problems.check(
             !self.hidden.is_empty() && self.hidden.iter().all(|&h| (1..=65_536).contains(&h)),
             "hidden",
             format!(
@@ -221,7 +214,7 @@ impl LearnerConfig {
                 self.hidden
             ),
         );
-        check(
+        problems.check(
             self.trunk != Trunk::Conv || self.hidden.len() >= 2,
             "hidden",
             format!(
@@ -229,7 +222,7 @@ impl LearnerConfig {
                 self.hidden
             ),
         );
-        check(
+        problems.check(
             (1..=65_536).contains(&self.batch_size),
             "batch_size",
             format!("must be between 1 and 65536, got {}", self.batch_size),
@@ -242,7 +235,7 @@ impl LearnerConfig {
             ("adam_eps", self.adam_eps),
             ("huber_delta", self.huber_delta),
         ] {
-            check(
+            problems.check(
                 positive(v),
                 key,
                 format!("must be finite and above 0, got {v}"),
@@ -253,9 +246,9 @@ impl LearnerConfig {
             ("adam_beta1", self.adam_beta1),
             ("adam_beta2", self.adam_beta2),
         ] {
-            check(fraction(v), key, format!("must be in [0, 1), got {v}"));
+            problems.check(fraction(v), key, format!("must be in [0, 1), got {v}"));
         }
-        check(
+        problems.check(
             self.max_grad_norm.is_finite() && self.max_grad_norm >= 0.0,
             "max_grad_norm",
             format!(
@@ -263,12 +256,12 @@ impl LearnerConfig {
                 self.max_grad_norm
             ),
         );
-        check(
+        problems.check(
             self.target_period >= 1,
             "target_period",
             "must be at least 1".to_owned(),
         );
-        check(
+        problems.check(
             self.target_tau > 0.0 && self.target_tau <= 1.0,
             "target_tau",
             format!("must be in (0, 1], got {}", self.target_tau),
@@ -277,44 +270,44 @@ impl LearnerConfig {
             ("importance_beta", self.importance_beta),
             ("importance_beta_final", self.importance_beta_final),
         ] {
-            check(
+            problems.check(
                 (0.0..=1.0).contains(&v),
                 key,
                 format!("must be in [0, 1], got {v}"),
             );
         }
-        check(
+        problems.check(
             self.priority_eps.is_finite() && self.priority_eps >= 0.0,
             "priority_eps",
             format!("must be finite and at least 0, got {}", self.priority_eps),
         );
-        check(
+        problems.check(
             (1..=64).contains(&self.prefetch),
             "prefetch",
             format!("must be between 1 and 64, got {}", self.prefetch),
         );
-        check(
+        problems.check(
             self.publish_every >= 1,
             "publish_every",
             "must be at least 1".to_owned(),
         );
-        check(
+        problems.check(
             self.checkpoint_keep >= 1,
             "checkpoint_keep",
             "must be at least 1".to_owned(),
         );
-        check(
+        problems.check(
             !self.best_metric.is_empty(),
             "best_metric",
             "must name an evaluation metric".to_owned(),
         );
-        check(
+        problems.check(
             self.api_token
                 .as_ref()
                 .is_none_or(|t| !t.is_empty() && t.chars().all(|c| c.is_ascii_graphic())),
             "api_token",
             "must be non-empty printable ASCII without spaces".to_owned(),
         );
-        problems
+        problems.into_vec()
     }
 }

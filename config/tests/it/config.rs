@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use crossroads_common::{Config, ConfigError, ConfigLoader, LogFormat};
+use crossroads_config::{Config, ConfigError, ConfigLoader, LogFormat};
 
 fn toml_file(content: &str) -> tempfile::NamedTempFile {
     let mut f = tempfile::Builder::new()

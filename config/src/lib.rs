@@ -1,0 +1,347 @@
+//! The one configuration schema of a crossroads run, and its layered loading.
+//!
+//! Every role reads the same file, so one file describes a run. Layers, each
+//! overriding the one before: built-in defaults, a TOML file, `CROSSROADS_*`
+//! environment variables (`CROSSROADS_<SECTION>__<KEY>`, double underscore
+//! between section and key), then command-line `--set section.key=value`
+//! flags and a role's own flags. Unknown keys, wrong types and out-of-range
+//! values are errors that name where the value came from, the key and the
+//! problem.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use figment::providers::{Env, Format, Serialized, Toml};
+use figment::value::Value;
+use figment::value::{Dict, Map};
+use figment::{Figment, Metadata, Profile, Provider, Source};
+use serde::{Deserialize, Serialize};
+
+pub mod actor;
+pub mod learner;
+pub mod replay;
+pub mod runtime;
+pub mod telemetry;
+pub mod train;
+pub mod transport;
+
+/// Action set names the simulator knows (`crossroads_sim::ActionSet`; this
+/// crate does not depend on the simulator).
+pub(crate) const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
+
+/// The problems a section's `validate` finds, each under its dotted key
+/// (`section.key`).
+pub(crate) struct Checks {
+    section: &'static str,
+    problems: Vec<(String, String)>,
+}
+
+impl Checks {
+    pub(crate) fn new(section: &'static str) -> Self {
+        Self {
+            section,
+            problems: Vec::new(),
+        }
+    }
+
+    /// Records `problem` under `key` unless `ok`.
+    pub(crate) fn check(&mut self, ok: bool, key: &str, problem: String) {
+        if !ok {
+            self.problems
+                .push((format!("{}.{key}", self.section), problem));
+        }
+    }
+
+    /// Records a problem unless `value` is one of `allowed`.
+    pub(crate) fn one_of(&mut self, key: &str, value: &str, allowed: &[&str]) {
+        self.check(
+            allowed.contains(&value),
+            key,
+            format!("must be one of {}, got {value:?}", allowed.join(", ")),
+        );
+    }
+
+    pub(crate) fn into_vec(self) -> Vec<(String, String)> {
+        self.problems
+    }
+}
+
+pub use actor::{ActorConfig, ActorTransport};
+pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
+pub use replay::{ReplayConfig, WeightNormalization};
+pub use runtime::RuntimeConfig;
+pub use telemetry::{LogFormat, TelemetryConfig};
+pub use train::TrainConfig;
+pub use transport::TransportConfig;
+
+const DEFAULTS: &str = "defaults";
+const COMMAND_LINE: &str = "command line";
+
+/// Prefix of the environment variables that override the config.
+pub const ENV_PREFIX: &str = "CROSSROADS_";
+
+/// The whole configuration of a run, one section per concern.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// Threads of the process.
+    pub runtime: RuntimeConfig,
+    /// Logs and metrics.
+    pub telemetry: TelemetryConfig,
+    /// The replay server: its table, rate limiter, limits and snapshots.
+    pub replay: ReplayConfig,
+    /// How roles reach each other: the replay server's address, shared
+    /// memory services, timeouts and retries.
+    pub transport: TransportConfig,
+    /// Actor processes: environments, exploration, n-step assembly and
+    /// transport of transitions.
+    pub actor: ActorConfig,
+    /// The learner: network, optimizer, targets, weight broadcast and
+    /// checkpoints.
+    pub learner: LearnerConfig,
+    /// `crossroads train`: actors started, evaluations, budget, target.
+    pub train: TrainConfig,
+}
+
+impl Config {
+    /// Checks values that the types alone cannot: ranges and relations.
+    /// Returns every problem found, each with its dotted key.
+    pub fn validate(&self) -> Vec<(String, String)> {
+        let mut problems = self.runtime.validate();
+        problems.extend(self.replay.validate());
+        problems.extend(self.transport.validate());
+        problems.extend(self.actor.validate());
+        problems.extend(self.learner.validate());
+        problems.extend(self.train.validate());
+        problems
+    }
+
+    /// The effective configuration as TOML, as `crossroads config show`
+    /// prints it and as roles log it at start.
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot render config: {e}"))
+    }
+}
+
+/// One problem with one key.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigProblem {
+    /// Where the offending value came from, e.g. `config file run.toml` or
+    /// `environment variable CROSSROADS_RUNTIME__WORKER_THREADS`.
+    pub origin: String,
+    /// Dotted key, e.g. `runtime.worker_threads`.
+    pub key: String,
+    /// What is wrong with it.
+    pub problem: String,
+}
+
+impl fmt::Display for ConfigProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: key `{}`: {}", self.origin, self.key, self.problem)
+    }
+}
+
+/// Why a configuration could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The config file named by the user could not be read.
+    #[error("cannot read config file {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A `--set` flag is not of the form `section.key=value`.
+    #[error("invalid --set {0:?}: expected section.key=value")]
+    BadOverride(String),
+    /// One or more keys are unknown, mistyped or out of range.
+    #[error("invalid configuration:\n  {}", .0.iter().map(ToString::to_string).collect::<Vec<_>>().join("\n  "))]
+    Invalid(Vec<ConfigProblem>),
+}
+
+impl ConfigError {
+    /// The problems, if the error is about keys.
+    pub fn problems(&self) -> &[ConfigProblem] {
+        match self {
+            ConfigError::Invalid(p) => p,
+            _ => &[],
+        }
+    }
+}
+
+/// Builds a [`Config`] from its layers. Later layers win.
+#[derive(Debug, Default, Clone)]
+pub struct ConfigLoader {
+    base: Option<(String, String)>,
+    file: Option<PathBuf>,
+    env: bool,
+    sets: Vec<String>,
+    flags: Vec<(String, Value)>,
+}
+
+impl ConfigLoader {
+    /// Defaults, plus the `CROSSROADS_*` environment variables.
+    pub fn new() -> Self {
+        Self {
+            env: true,
+            ..Self::default()
+        }
+    }
+
+    /// Ignores the environment (for tests and tools that want only a file).
+    pub fn without_env(mut self) -> Self {
+        self.env = false;
+        self
+    }
+
+    /// A built-in TOML text under `name` (an experiment's settings, say),
+    /// applied over the defaults and under the file and everything else.
+    pub fn base(mut self, name: impl Into<String>, toml: impl Into<String>) -> Self {
+        self.base = Some((name.into(), toml.into()));
+        self
+    }
+
+    /// Reads this TOML file (it must exist).
+    pub fn file(mut self, path: Option<impl AsRef<Path>>) -> Self {
+        self.file = path.map(|p| p.as_ref().to_path_buf());
+        self
+    }
+
+    /// Adds `--set section.key=value` overrides, applied after the
+    /// environment. Values parse as TOML-like scalars or arrays; anything
+    /// else is a string.
+    pub fn sets<I, S>(mut self, sets: I) -> Self
+    where
+        I: IntoIterator<Item = S>,
+        S: Into<String>,
+    {
+        self.sets.extend(sets.into_iter().map(Into::into));
+        self
+    }
+
+    /// Adds a role's own flag, e.g. `("replay.capacity", 100_000)`; applied
+    /// last.
+    pub fn flag(mut self, key: &str, value: impl Serialize) -> Self {
+        if let Ok(v) = Value::serialize(value) {
+            self.flags.push((key.to_owned(), v));
+        }
+        self
+    }
+
+    /// Merges the layers, deserializes and validates.
+    pub fn load(&self) -> Result<Config, ConfigError> {
+        let mut figment = Figment::from(Named {
+            name: DEFAULTS.into(),
+            inner: Serialized::defaults(Config::default()),
+        });
+        if let Some((name, text)) = &self.base {
+            figment = figment.merge(Named {
+                name: name.clone().into(),
+                inner: Toml::string(text),
+            });
+        }
+        if let Some(path) = &self.file {
+            // figment treats a missing file as empty; a file the user named
+            // must exist.
+            std::fs::metadata(path).map_err(|source| ConfigError::Read {
+                path: path.clone(),
+                source,
+            })?;
+            figment = figment.merge(Toml::file_exact(path));
+        }
+        if self.env {
+            // Only section-scoped variables are config; others with the same
+            // prefix (CROSSROADS_WHEEL_CACHE, say) are not ours to reject.
+            figment = figment.merge(
+                Env::prefixed(ENV_PREFIX)
+                    .filter(|k| k.as_str().contains("__"))
+                    .split("__"),
+            );
+        }
+        for set in &self.sets {
+            let (key, value) = set
+                .split_once('=')
+                .filter(|(k, _)| !k.trim().is_empty())
+                .ok_or_else(|| ConfigError::BadOverride(set.clone()))?;
+            let value: Value = value.trim().parse().unwrap_or_else(|_| Value::from(value));
+            figment = figment.merge(Named {
+                name: COMMAND_LINE.into(),
+                inner: Serialized::default(key.trim(), value),
+            });
+        }
+        for (key, value) in &self.flags {
+            figment = figment.merge(Named {
+                name: COMMAND_LINE.into(),
+                inner: Serialized::default(key, value),
+            });
+        }
+
+        let config: Config = figment.extract().map_err(|e| {
+            ConfigError::Invalid(e.into_iter().map(|e| problem_of(&figment, &e)).collect())
+        })?;
+        let problems: Vec<_> = config
+            .validate()
+            .into_iter()
+            .map(|(key, problem)| ConfigProblem {
+                origin: origin_of(figment.find_metadata(&key), &key),
+                key,
+                problem,
+            })
+            .collect();
+        if problems.is_empty() {
+            Ok(config)
+        } else {
+            Err(ConfigError::Invalid(problems))
+        }
+    }
+}
+
+/// A provider under a name of ours, so errors can say where a value came
+/// from ("defaults", "command line") rather than "Serialized".
+struct Named<P> {
+    name: std::borrow::Cow<'static, str>,
+    inner: P,
+}
+
+impl<P: Provider> Provider for Named<P> {
+    fn metadata(&self) -> Metadata {
+        Metadata::named(self.name.clone())
+    }
+
+    fn data(&self) -> Result<Map<Profile, Dict>, figment::Error> {
+        self.inner.data()
+    }
+}
+
+fn problem_of(figment: &Figment, e: &figment::Error) -> ConfigProblem {
+    use figment::error::Kind;
+    // For an unknown field the path already ends with the field's name.
+    let key = e.path.join(".");
+    let problem = match &e.kind {
+        Kind::UnknownField(_, expected) => {
+            format!("unknown key; expected one of: {}", expected.join(", "))
+        }
+        kind => kind.to_string(),
+    };
+    let metadata = e.metadata.as_ref().or_else(|| figment.find_metadata(&key));
+    ConfigProblem {
+        origin: origin_of(metadata, &key),
+        key,
+        problem,
+    }
+}
+
+fn origin_of(metadata: Option<&Metadata>, key: &str) -> String {
+    let Some(md) = metadata else {
+        return "configuration".to_owned();
+    };
+    match &md.source {
+        Some(Source::File(path)) => format!("config file {}", path.display()),
+        _ if md.name.contains("environment") => {
+            let var = format!("{ENV_PREFIX}{}", key.replace('.', "__").to_uppercase());
+            format!("environment variable {var}")
+        }
+        _ => md.name.to_string(),
+    }
+}

@@ -1,0 +1,3 @@
+//! The configuration schema and its layered loading, as a role loads it.
+
+mod config;
