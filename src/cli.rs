@@ -218,7 +218,7 @@ pub struct ReproduceArgs {
     /// Update budget of each training run (replaces the experiment's).
     #[arg(long, value_name = "N")]
     pub updates: Option<u64>,
-    /// Actor processes per training run (train.actors).
+    /// Actor processes per training run (actor.count).
     #[arg(long, value_name = "N")]
     pub actors: Option<u32>,
     /// Trials per table cell and per TTC threshold.
@@ -258,14 +258,14 @@ pub enum Part {
 /// `crossroads train`. Each flag overrides the configuration key it names.
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
-    /// Scenario (actor.scenario; the learner follows).
+    /// Scenario (sim.scenario).
     #[arg(long, value_name = "NAME|FILE")]
     pub scenario: Option<String>,
-    /// Action set: ttg, sequential or creep (actor.action_set; the
-    /// learner's network and observation follow).
+    /// Action set: ttg, sequential or creep (sim.action_set; the
+    /// observation and the network follow).
     #[arg(long, value_name = "SET")]
     pub actions: Option<String>,
-    /// Actor processes (train.actors).
+    /// Actor processes (actor.count).
     #[arg(long, value_name = "N")]
     pub actors: Option<u32>,
     /// Environments per actor (actor.envs).
@@ -286,14 +286,14 @@ pub struct TrainArgs {
     pub resume: bool,
 }
 
-/// `crossroads actor`. Each flag overrides the `[actor]` (or
+/// `crossroads actor`. Each flag overrides the `[actor]` (or `[sim]`,
 /// `[transport]`) key it names.
 #[derive(Debug, Clone, Args)]
 pub struct ActorArgs {
-    /// Scenario of the environments (actor.scenario).
+    /// Scenario of the environments (sim.scenario).
     #[arg(long, value_name = "NAME|FILE")]
     pub scenario: Option<String>,
-    /// Action set: ttg, sequential or creep (actor.action_set).
+    /// Action set: ttg, sequential or creep (sim.action_set).
     #[arg(long, value_name = "SET")]
     pub actions: Option<String>,
     /// Environments stepped in parallel (actor.envs).
@@ -329,8 +329,8 @@ impl ActorArgs {
     /// Layers these flags over `loader`.
     pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
         let text = [
-            ("actor.scenario", &self.scenario),
-            ("actor.action_set", &self.actions),
+            ("sim.scenario", &self.scenario),
+            ("sim.action_set", &self.actions),
             ("actor.transport", &self.transport),
             ("actor.weights", &self.weights),
             ("transport.replay_endpoint", &self.replay),

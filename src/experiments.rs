@@ -7,8 +7,8 @@
 pub struct Experiment {
     /// `<actions>-<scenario>`, the file's stem.
     pub name: &'static str,
-    /// The configuration (a TOML document with `[actor]`, `[replay]`,
-    /// `[learner]` and `[train]`).
+    /// The configuration (a TOML document with `[sim]`, `[actor]`,
+    /// `[replay]`, `[learner]` and `[train]`).
     pub toml: &'static str,
 }
 

@@ -26,7 +26,14 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Train(args) => args.loader(&cli.global),
         _ => cli.global.loader(),
     };
-    let config = loader.load().context("loading configuration")?;
+    let mut config = loader.load().context("loading configuration")?;
+    if matches!(
+        cli.command,
+        Command::Learner(_) | Command::Actor(_) | Command::Train(_) | Command::Bench(_)
+    ) {
+        // The network reads what the actors produce: derived once, here.
+        crossroads_actor::resolve_observation(&mut config.sim).context("loading configuration")?;
+    }
     crossroads_common::telemetry::init_tracing(config.telemetry.log_format)?;
     if config.runtime.compute_threads > 0 {
         rayon::ThreadPoolBuilder::new()

@@ -4,9 +4,9 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use crossroads_common::retry::Backoff;
-use crossroads_config::{ActorConfig, TransportConfig};
 use crossroads_common::Shutdown;
+use crossroads_common::retry::Backoff;
+use crossroads_config::{ActorConfig, SimConfig, TransportConfig};
 use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;
@@ -52,14 +52,41 @@ pub struct ActorSettings {
     pub cut_at_exploration: bool,
 }
 
+/// `[sim]`'s scenario, compiled, and its action set.
+fn load_sim(sim: &SimConfig) -> Result<(Arc<Scenario>, ActionSet), ActorError> {
+    let scenario = Arc::new(Scenario::load(&sim.scenario)?);
+    let action_set: ActionSet = sim
+        .action_set
+        .parse()
+        .map_err(|e: crossroads_sim::SimError| {
+            ActorError::Config(format!("sim.action_set: {e}"))
+        })?;
+    Ok((scenario, action_set))
+}
+
+/// Fills `sim.observation` with the observation actors of `[sim]`'s
+/// scenario and action set produce (the paper's pairing: the Sequential
+/// grid for Sequential actions, the TTG grid otherwise, occlusion channels
+/// when the scenario has occluders), or checks that the one given is that.
+/// Every role resolves it at start, so the learner's network reads what the
+/// actors send.
+pub fn resolve_observation(sim: &mut SimConfig) -> Result<(), ActorError> {
+    let (scenario, action_set) = load_sim(sim)?;
+    let env = crossroads_sim::Env::new(scenario, EnvConfig::for_actions(action_set));
+    let produced = crate::batch_spec(env.obs_spec()).kind;
+    sim.resolve_observation(&produced)
+        .map_err(ActorError::Config)
+}
+
 impl ActorSettings {
-    /// From `[actor]`, for actor `index` (see [`resolve_index`]).
-    pub fn from_config(config: &ActorConfig, index: u32) -> Result<Self, ActorError> {
-        let scenario = Arc::new(Scenario::load(&config.scenario)?);
-        let action_set: ActionSet = config
-            .action_set
-            .parse()
-            .map_err(|e: crossroads_sim::SimError| ActorError::Config(e.to_string()))?;
+    /// From `[sim]` and `[actor]`, for actor `index` (see
+    /// [`resolve_index`]).
+    pub fn from_config(
+        sim: &SimConfig,
+        config: &ActorConfig,
+        index: u32,
+    ) -> Result<Self, ActorError> {
+        let (scenario, action_set) = load_sim(sim)?;
         let count = config.count.max(1);
         if index >= count {
             return Err(ActorError::Config(format!(

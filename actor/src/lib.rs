@@ -37,6 +37,7 @@ mod weights;
 
 pub use actor::{
     Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
+    resolve_observation,
 };
 pub use buffer::PushBuffer;
 pub use error::ActorError;

@@ -15,9 +15,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crossroads_config::TransportConfig;
-use crossroads_config::ActorTransport;
 use crossroads_common::{Backoff, Shutdown};
+use crossroads_config::ActorTransport;
+use crossroads_config::TransportConfig;
 use crossroads_transport::grpc::{ClientError, InsertStream, ReplayClient};
 use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
 use crossroads_types::TransitionBatch;

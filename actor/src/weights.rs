@@ -15,9 +15,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_config::TransportConfig;
-use crossroads_config::ActorTransport;
 use crossroads_common::{Backoff, Shutdown};
+use crossroads_config::ActorTransport;
+use crossroads_config::TransportConfig;
 use crossroads_model::QNetwork;
 use crossroads_transport::LearnerClient;
 use crossroads_transport::weights_shm::ShmWeightsSubscriber;

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{ACTION_SETS, Checks};
+use super::Checks;
 
 /// How an actor sends its batches to the replay server.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -17,19 +17,12 @@ pub enum ActorTransport {
     Shm,
 }
 
-/// An actor process (`crossroads actor`): M environments of one scenario,
+/// An actor process (`crossroads actor`): M environments of `[sim]`'s scenario,
 /// one batched forward pass per step, epsilon-greedy exploration from the
 /// Ape-X ladder, n-step transitions pushed in batches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ActorConfig {
-    /// Scenario the environments run: a built-in name or a TOML file.
-    pub scenario: String,
-    /// Action set: `ttg` (5), `sequential` (12) or `creep` (3). The
-    /// observation follows the paper's pairing (Sequential grid for
-    /// Sequential actions, TTG grid otherwise; occlusion channels when the
-    /// scenario has occluders).
-    pub action_set: String,
     /// Environments stepped in parallel per process (M). 1 to 4096.
     pub envs: usize,
     /// Transitions (decisions, not simulation steps) summed into one
@@ -51,7 +44,8 @@ pub struct ActorConfig {
     /// per name) and takes it modulo `count`, as scaled compose services and
     /// Kubernetes Deployments need; an evaluating actor uses 0.
     pub index: Option<u32>,
-    /// Number of actors N in the run. At least 1.
+    /// Number of actors N in the run (`crossroads train` starts this
+    /// many). 1 to 256.
     pub count: u32,
     /// Base seed of the run; each actor derives its own from it and its
     /// index, each environment its episodes' seeds from that.
@@ -97,8 +91,6 @@ pub struct ActorConfig {
 impl Default for ActorConfig {
     fn default() -> Self {
         Self {
-            scenario: "left".to_owned(),
-            action_set: "ttg".to_owned(),
             envs: 8,
             n_step: 3,
             gamma: 0.99,
@@ -131,12 +123,6 @@ impl ActorConfig {
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("actor");
         problems.check(
-            !self.scenario.is_empty(),
-            "scenario",
-            "must name a scenario".to_owned(),
-        );
-        problems.one_of("action_set", &self.action_set, &ACTION_SETS);
-        problems.check(
             (1..=4096).contains(&self.envs),
             "envs",
             format!("must be between 1 and 4096, got {}", self.envs),
@@ -163,7 +149,11 @@ impl ActorConfig {
             "batch_size",
             format!("must be between 1 and 16384, got {}", self.batch_size),
         );
-        problems.check(self.count >= 1, "count", "must be at least 1".to_owned());
+        problems.check(
+            (1..=256).contains(&self.count),
+            "count",
+            format!("must be between 1 and 256, got {}", self.count),
+        );
         if let Some(index) = self.index {
             problems.check(
                 index < self.count,

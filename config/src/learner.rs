@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::{ACTION_SETS, Checks};
+use super::Checks;
 
 /// Which optimizer trains the online network.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -52,14 +52,6 @@ pub struct LearnerConfig {
     /// gRPC address of the learner service (weights, checkpoints, status);
     /// port 0 picks a free port.
     pub listen: SocketAddr,
-    /// Scenario the run trains on; recorded in checkpoints and status.
-    pub scenario: String,
-    /// Observation the network reads: `ttg`, `ttg-occlusion`, `sequential`
-    /// or `sequential-occlusion`.
-    pub observation: String,
-    /// Action set the network scores: `ttg` (5), `sequential` (12) or
-    /// `creep` (3).
-    pub action_set: String,
     /// Trunk of the dueling network: `mlp` or `conv`.
     pub trunk: Trunk,
     /// For `mlp` the hidden widths; for `conv` the channels of each 3x3
@@ -152,9 +144,6 @@ impl Default for LearnerConfig {
     fn default() -> Self {
         Self {
             listen: SocketAddr::from(([127, 0, 0, 1], 50052)),
-            scenario: "left".to_owned(),
-            observation: "ttg".to_owned(),
-            action_set: "ttg".to_owned(),
             trunk: Trunk::Mlp,
             hidden: vec![256, 256],
             seed: 1,
@@ -189,8 +178,6 @@ impl Default for LearnerConfig {
     }
 }
 
-const OBSERVATIONS: [&str; 4] = ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
-
 impl LearnerConfig {
     /// A copy safe to log or show: the API token replaced.
     pub fn redacted(&self) -> Self {
@@ -204,8 +191,6 @@ impl LearnerConfig {
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("learner");
-        problems.one_of("observation", &self.observation, &OBSERVATIONS);
-        problems.one_of("action_set", &self.action_set, &ACTION_SETS);
         problems.check(
             !self.hidden.is_empty() && self.hidden.iter().all(|&h| (1..=65_536).contains(&h)),
             "hidden",

@@ -21,6 +21,7 @@ pub mod actor;
 pub mod learner;
 pub mod replay;
 pub mod runtime;
+pub mod sim;
 pub mod telemetry;
 pub mod train;
 pub mod transport;
@@ -70,6 +71,7 @@ pub use actor::{ActorConfig, ActorTransport};
 pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
 pub use replay::{ReplayConfig, WeightNormalization};
 pub use runtime::RuntimeConfig;
+pub use sim::SimConfig;
 pub use telemetry::{LogFormat, TelemetryConfig};
 pub use train::TrainConfig;
 pub use transport::TransportConfig;
@@ -88,6 +90,9 @@ pub struct Config {
     pub runtime: RuntimeConfig,
     /// Logs and metrics.
     pub telemetry: TelemetryConfig,
+    /// What the run simulates and learns on: scenario, action set and
+    /// observation, stated once for every role.
+    pub sim: SimConfig,
     /// The replay server: its table, rate limiter, limits and snapshots.
     pub replay: ReplayConfig,
     /// How roles reach each other: the replay server's address, shared
@@ -108,6 +113,7 @@ impl Config {
     /// Returns every problem found, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = self.runtime.validate();
+        problems.extend(self.sim.validate());
         problems.extend(self.replay.validate());
         problems.extend(self.transport.validate());
         problems.extend(self.actor.validate());
@@ -229,8 +235,20 @@ impl ConfigLoader {
         self
     }
 
-    /// Merges the layers, deserializes and validates.
+    /// Merges the layers, deserializes and validates. Keys of the older
+    /// schema ([`MOVED_KEYS`]) are read at their new place with a warning
+    /// on standard error (the log is not set up yet: its format is config).
     pub fn load(&self) -> Result<Config, ConfigError> {
+        let (config, notes) = self.load_with_notes()?;
+        for note in &notes {
+            eprintln!("warning: {note}");
+        }
+        Ok(config)
+    }
+
+    /// [`Self::load`], returning the deprecation warnings instead of
+    /// printing them.
+    pub fn load_with_notes(&self) -> Result<(Config, Vec<String>), ConfigError> {
         let mut figment = Figment::from(Named {
             name: DEFAULTS.into(),
             inner: Serialized::defaults(Config::default()),
@@ -277,7 +295,8 @@ impl ConfigLoader {
             });
         }
 
-        let config: Config = figment.extract().map_err(|e| {
+        let (merged, notes) = move_legacy_keys(&figment)?;
+        let config: Config = merged.as_ref().unwrap_or(&figment).extract().map_err(|e| {
             ConfigError::Invalid(e.into_iter().map(|e| problem_of(&figment, &e)).collect())
         })?;
         let problems: Vec<_> = config
@@ -290,10 +309,117 @@ impl ConfigLoader {
             })
             .collect();
         if problems.is_empty() {
-            Ok(config)
+            Ok((config, notes))
         } else {
             Err(ConfigError::Invalid(problems))
         }
+    }
+}
+
+/// Keys of the older schema that said one thing in two places, and the one
+/// key that now says it. Files with them still load, with a warning per
+/// key; two of them that disagree, or one that disagrees with the new key,
+/// are refused.
+pub const MOVED_KEYS: [(&str, &str); 6] = [
+    ("actor.scenario", "sim.scenario"),
+    ("learner.scenario", "sim.scenario"),
+    ("actor.action_set", "sim.action_set"),
+    ("learner.action_set", "sim.action_set"),
+    ("learner.observation", "sim.observation"),
+    ("train.actors", "actor.count"),
+];
+
+/// A merged configuration with [`MOVED_KEYS`] moved to their new place
+/// (`None` when no layer has an old key), and a warning per old key found.
+fn move_legacy_keys(figment: &Figment) -> Result<(Option<Figment>, Vec<String>), ConfigError> {
+    let found: Vec<_> = MOVED_KEYS
+        .iter()
+        .filter_map(|&(old, new)| figment.find_value(old).ok().map(|v| (old, new, v)))
+        .collect();
+    if found.is_empty() {
+        return Ok((None, Vec::new()));
+    }
+    let mut data: Dict = figment.extract().map_err(|e| {
+        ConfigError::Invalid(e.into_iter().map(|e| problem_of(figment, &e)).collect())
+    })?;
+    let mut problems = Vec::new();
+    let mut notes = Vec::new();
+    let mut refuse = |key: &str, problem: String| {
+        problems.push(ConfigProblem {
+            origin: origin_of(figment.find_metadata(key), key),
+            key: key.to_owned(),
+            problem,
+        });
+    };
+    for &(old, new, ref value) in &found {
+        let origin = origin_of(figment.find_metadata(old), old);
+        notes.push(format!(
+            "{origin}: key `{old}` is deprecated and was read as `{new}`; write `{new}` once instead"
+        ));
+        // Another old key for the same new one that says otherwise.
+        if let Some(&(other, _, ref theirs)) = found
+            .iter()
+            .find(|&&(o, n, ref v)| n == new && o != old && v != value)
+        {
+            refuse(
+                old,
+                format!(
+                    "says {}, but `{other}` says {}; both moved to `{new}`: state it once there",
+                    show(value),
+                    show(theirs)
+                ),
+            );
+            continue;
+        }
+        let set_explicitly = figment
+            .find_metadata(new)
+            .is_some_and(|m| m.name != DEFAULTS);
+        if set_explicitly
+            && let Ok(current) = figment.find_value(new)
+            && current != *value
+        {
+            refuse(
+                old,
+                format!(
+                    "moved to `{new}`, which says {} here while `{old}` says {}; remove `{old}`",
+                    show(&current),
+                    show(value)
+                ),
+            );
+            continue;
+        }
+        let (old_section, old_key) = old.split_once('.').expect("dotted");
+        if let Some(Value::Dict(_, section)) = data.get_mut(old_section) {
+            section.remove(old_key);
+        }
+        let (new_section, new_key) = new.split_once('.').expect("dotted");
+        if let Some(Value::Dict(_, section)) = data.get_mut(new_section) {
+            section.insert(new_key.to_owned(), value.clone());
+        } else {
+            let mut section = Dict::new();
+            section.insert(new_key.to_owned(), value.clone());
+            data.insert(new_section.to_owned(), Value::from(section));
+        }
+    }
+    if !problems.is_empty() {
+        return Err(ConfigError::Invalid(problems));
+    }
+    Ok((Some(Figment::from(Serialized::defaults(data))), notes))
+}
+
+/// A value as the user wrote it, for messages.
+fn show(value: &Value) -> String {
+    match value {
+        Value::String(_, s) => format!("{s:?}"),
+        Value::Bool(_, b) => b.to_string(),
+        Value::Num(_, n) => n.to_i128().map_or_else(
+            || {
+                n.to_f64()
+                    .map_or_else(|| format!("{n:?}"), |f| f.to_string())
+            },
+            |i| i.to_string(),
+        ),
+        other => format!("{other:?}"),
     }
 }
 
@@ -324,7 +450,9 @@ fn problem_of(figment: &Figment, e: &figment::Error) -> ConfigProblem {
         }
         kind => kind.to_string(),
     };
-    let metadata = e.metadata.as_ref().or_else(|| figment.find_metadata(&key));
+    // The layer the key came from (`figment` is the layered one, also when
+    // the error is of the merged figment that moved legacy keys).
+    let metadata = figment.find_metadata(&key).or(e.metadata.as_ref());
     ConfigProblem {
         origin: origin_of(metadata, &key),
         key,

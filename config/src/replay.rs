@@ -172,7 +172,10 @@ impl ReplayConfig {
         problems.check(
             (1..=1 << 20).contains(&self.max_sample_batch),
             "max_sample_batch",
-            format!("must be between 1 and 1048576, got {}", self.max_sample_batch),
+            format!(
+                "must be between 1 and 1048576, got {}",
+                self.max_sample_batch
+            ),
         );
         problems.check(
             self.snapshot_keep >= 1,

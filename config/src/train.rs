@@ -1,20 +1,16 @@
 //! `[train]`: how `crossroads train` runs a whole training job on one
-//! machine: how many actors, how they reach the replay, greedy
+//! machine: how its actors reach the replay, greedy
 //! evaluations, the time budget and the target that counts as reached.
 
 use serde::{Deserialize, Serialize};
 
-use super::Checks;
+use super::{ActorTransport, Checks};
 
-use super::ActorTransport;
-
-/// `crossroads train`: the replay, the learner and `actors` actor processes
+/// `crossroads train`: the replay, the learner and `actor.count` actor processes
 /// on this machine. The update budget is `learner.max_updates`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
-    /// Actor processes started. 1 to 256.
-    pub actors: u32,
     /// How the actors push transitions and get weights: `shm` (iceoryx2,
     /// the local transport) or `grpc`.
     pub transport: ActorTransport,
@@ -54,7 +50,6 @@ pub struct TrainConfig {
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
-            actors: 1,
             transport: ActorTransport::Shm,
             eval_every: 2_000,
             eval_trials: 1_000,
@@ -74,11 +69,6 @@ impl TrainConfig {
     /// Range checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("train");
-        problems.check(
-            (1..=256).contains(&self.actors),
-            "actors",
-            format!("must be between 1 and 256, got {}", self.actors),
-        );
         for (key, v) in [
             ("eval_every", self.eval_every),
             ("eval_trials", self.eval_trials),

@@ -95,7 +95,8 @@ impl TransportConfig {
         problems.check(
             !self.shm_prefix.is_empty()
                 && self.shm_prefix.len() <= 128
-                && self.shm_prefix
+                && self
+                    .shm_prefix
                     .chars()
                     .all(|c| c.is_ascii_alphanumeric() || "-_./".contains(c)),
             "shm_prefix",
@@ -107,7 +108,10 @@ impl TransportConfig {
         problems.check(
             (1..=4096).contains(&self.shm_max_publishers),
             "shm_max_publishers",
-            format!("must be between 1 and 4096, got {}", self.shm_max_publishers),
+            format!(
+                "must be between 1 and 4096, got {}",
+                self.shm_max_publishers
+            ),
         );
         problems.check(
             (1..=65_536).contains(&self.shm_buffer),

@@ -4,7 +4,7 @@
 //! tensors. `crossroads bench learner` adds the gRPC-fed run and PyTorch.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use crossroads_config::LearnerConfig;
+use crossroads_config::{LearnerConfig, SimConfig};
 use crossroads_learner::bench::{SplitMix, synthetic_batch};
 use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
 
@@ -16,7 +16,11 @@ fn updates(c: &mut Criterion) {
             batch_size: batch,
             ..LearnerConfig::default()
         };
-        let tc = TrainerConfig::from_config(&config).expect("default config is valid");
+        let sim = SimConfig {
+            observation: Some("ttg".to_owned()),
+            ..SimConfig::default()
+        };
+        let tc = TrainerConfig::from_config(&sim, &config).expect("default config is valid");
         let mut rng = SplitMix::new(1);
         let batches: Vec<TrainingBatch> = (0..4)
             .map(|_| {

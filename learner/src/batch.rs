@@ -80,7 +80,7 @@ impl TrainingBatch {
         if values != Some(input) {
             return Err(LearnerError::Batch(format!(
                 "observations are {} ({} values), the network reads {} ({input} values); \
-                 learner.observation must match what the actors send",
+                 sim.observation must match what the actors send",
                 batch.spec,
                 values.map_or_else(|| "invalid".to_owned(), |v| v.to_string()),
                 spec.observation.kind,

@@ -5,8 +5,8 @@
 
 use std::time::{Duration, Instant};
 
-use crossroads_config::{Config, LearnerConfig};
 use crossroads_common::Shutdown;
+use crossroads_config::{Config, LearnerConfig, SimConfig};
 use crossroads_model::NetworkSpec;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
@@ -130,13 +130,15 @@ pub fn median(v: &[f64]) -> f64 {
 
 /// Times `rounds` rounds of updates of at least `round_time` each on a
 /// fixed pool of in-memory batches (data generation is not timed), after a
-/// warm-up; the network and optimizer are `config`'s.
+/// warm-up; the network is `sim`'s and `config`'s, the optimizer
+/// `config`'s.
 pub fn updates_per_second(
+    sim: &SimConfig,
     config: &LearnerConfig,
     rounds: usize,
     round_time: Duration,
 ) -> Result<UpdateRate, LearnerError> {
-    let tc = TrainerConfig::from_config(config)?;
+    let tc = TrainerConfig::from_config(sim, config)?;
     let mut rng = SplitMix::new(7);
     let batches: Vec<TrainingBatch> = (0..8)
         .map(|i| {

@@ -7,8 +7,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use crossroads_config::LearnerConfig;
 use crossroads_common::{Backoff, Shutdown};
+use crossroads_config::LearnerConfig;
 use crossroads_model::NetworkSpec;
 use crossroads_transport::grpc::ReplayClient;
 use tokio::sync::mpsc;

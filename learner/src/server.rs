@@ -13,8 +13,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicU64;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_config::Config;
 use crossroads_common::{Backoff, Shutdown};
+use crossroads_config::Config;
 use crossroads_proto::v1::learner_server::LearnerServer;
 use crossroads_transport::grpc::ReplayClient;
 use parking_lot::Mutex;
@@ -86,7 +86,7 @@ pub async fn start(
     shutdown: Shutdown,
 ) -> Result<RunningLearner, LearnerError> {
     let lc = &config.learner;
-    let spec = TrainerConfig::from_config(lc)?.spec;
+    let spec = TrainerConfig::from_config(&config.sim, lc)?.spec;
     if config.runtime.compute_threads > 0 {
         tch::set_num_threads(config.runtime.compute_threads as i32);
     }
@@ -220,12 +220,11 @@ pub async fn start(
             let stop = stop.clone();
             async move { stop.wait().await }
         });
-    let l = &config.learner;
     tracing::info!(
         %addr,
         replay = %config.transport.replay_endpoint,
-        observation = %l.observation,
-        action_set = %l.action_set,
+        observation = config.sim.observation().unwrap_or("unresolved"),
+        action_set = %config.sim.action_set,
         "learner listening"
     );
 

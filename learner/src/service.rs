@@ -263,7 +263,7 @@ impl pb::learner_server::Learner for LearnerService {
             mean_q: s.mean_q,
             updates_per_second: s.updates_per_second,
             uptime_seconds: self.shared.started.elapsed().as_secs_f64(),
-            scenario: config.learner.scenario.clone(),
+            scenario: config.sim.scenario.clone(),
             latest_checkpoint: s.latest_checkpoint,
             config_toml: config.to_toml(),
         }))

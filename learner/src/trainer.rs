@@ -1,7 +1,7 @@
 //! [`Trainer`]: the online and target networks and the optimizer, and
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
 
-use crossroads_config::{LearnerConfig, TargetUpdate, Trunk};
+use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate, Trunk};
 use crossroads_model::{ModelError, NetworkSpec, QNetwork, TrunkKind};
 use tch::{Kind, Tensor};
 
@@ -34,10 +34,11 @@ pub struct TrainerConfig {
 }
 
 impl TrainerConfig {
-    /// The trainer `[learner]` describes; fails on an invalid network.
-    pub fn from_config(c: &LearnerConfig) -> Result<Self, LearnerError> {
+    /// The trainer `[sim]` and `[learner]` describe; fails on an invalid
+    /// network.
+    pub fn from_config(sim: &SimConfig, c: &LearnerConfig) -> Result<Self, LearnerError> {
         Ok(Self {
-            spec: network_spec(c)?,
+            spec: network_spec(sim, c)?,
             seed: c.seed,
             optimizer: OptimizerConfig::from_config(c),
             max_grad_norm: c.max_grad_norm,
@@ -50,17 +51,25 @@ impl TrainerConfig {
     }
 }
 
-/// The network `[learner]` describes (observation, action set, trunk,
-/// hidden sizes); actors build their first network from it too.
-pub fn network_spec(c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
+/// The network `[sim]` (observation, action set) and `[learner]` (trunk,
+/// hidden sizes) describe; actors build their first network from it too.
+/// `sim.observation` must be resolved (every role does at start).
+pub fn network_spec(sim: &SimConfig, c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
+    let observation = sim.observation().ok_or_else(|| {
+        ModelError::Spec(
+            "sim.observation is unset: a role derives it from sim.scenario and \
+             sim.action_set at start (crossroads_actor::resolve_observation)"
+                .to_owned(),
+        )
+    })?;
     let trunk = match c.trunk {
         Trunk::Mlp => TrunkKind::Mlp,
         Trunk::Conv => TrunkKind::Conv,
     };
     let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
     Ok(NetworkSpec::new(
-        &c.observation,
-        &c.action_set,
+        observation,
+        &sim.action_set,
         trunk,
         hidden,
     )?)

@@ -8,8 +8,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
 use crossroads_transport::convert::PublishedWeights;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 use parking_lot::Mutex;
@@ -142,7 +142,7 @@ impl Learner {
     /// Runs on the training thread.
     pub fn new(shared: Arc<Shared>) -> Result<Self, LearnerError> {
         let config = &shared.config;
-        let trainer = Trainer::new(TrainerConfig::from_config(&config.learner)?)?;
+        let trainer = Trainer::new(TrainerConfig::from_config(&config.sim, &config.learner)?)?;
         let shm = if config.learner.shm_publish {
             let bytes = trainer.online().to_safetensors(0)?.len();
             Some(
@@ -396,7 +396,7 @@ impl Learner {
         let entry = store.write(&NewCheckpoint {
             state: &state,
             weights_version: self.version,
-            scenario: &config.learner.scenario,
+            scenario: &config.sim.scenario,
             network: self.trainer.online().spec(),
             optimizer: self.trainer.config().optimizer.name(),
             eval_metrics: &self.eval.1,

@@ -26,7 +26,8 @@ pub fn run(config: &Config, args: &ActorArgs) -> anyhow::Result<ExitCode> {
 async fn serve(config: &Config, max_steps: Option<u64>) -> anyhow::Result<()> {
     let ac = &config.actor;
     // A bad [actor] section fails before anything starts or waits.
-    ActorSettings::from_config(ac, ac.index.unwrap_or(0)).context("configuring the actor")?;
+    ActorSettings::from_config(&config.sim, ac, ac.index.unwrap_or(0))
+        .context("configuring the actor")?;
     let role = Role::start(config, "actor").await?;
     let result = async {
         let Some(index) = resolve_index(
@@ -43,7 +44,8 @@ async fn serve(config: &Config, max_steps: Option<u64>) -> anyhow::Result<()> {
             tracing::info!("actor stopped before it started acting");
             return Ok(());
         };
-        let settings = ActorSettings::from_config(ac, index).context("configuring the actor")?;
+        let settings =
+            ActorSettings::from_config(&config.sim, ac, index).context("configuring the actor")?;
         tracing::info!(
             index,
             count = settings.count,
@@ -69,7 +71,7 @@ async fn act(
     max_steps: Option<u64>,
 ) -> anyhow::Result<()> {
     let metrics = ActorMetrics::new(Some(&role.registry), settings.scenario.name())?;
-    let spec = crossroads_learner::network_spec(&config.learner)
+    let spec = crossroads_learner::network_spec(&config.sim, &config.learner)
         .context("the [learner] network the actor starts from")?;
     let net = QNetwork::new(spec, config.learner.seed).context("building the first network")?;
     let slot = WeightsSlot::new();

@@ -6,8 +6,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use crossroads_common::metrics::registry;
-use crossroads_config::Config;
 use crossroads_common::{MetricsServer, Shutdown};
+use crossroads_config::Config;
 use prometheus::Registry;
 
 /// Runs `serve` on a multi-threaded runtime of `runtime.worker_threads`.

@@ -124,8 +124,8 @@ fn a_built_in_experiment_is_the_base_of_any_role() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let shown: toml::Value = toml::from_str(&stdout(&out)).expect("stdout is TOML");
-    assert_eq!(shown["actor"]["scenario"].as_str(), Some("right"));
-    assert_eq!(shown["actor"]["action_set"].as_str(), Some("sequential"));
+    assert_eq!(shown["sim"]["scenario"].as_str(), Some("right"));
+    assert_eq!(shown["sim"]["action_set"].as_str(), Some("sequential"));
     assert_eq!(shown["learner"]["max_updates"].as_integer(), Some(120_000));
     assert_eq!(
         shown["learner"]["batch_size"].as_integer(),
@@ -188,4 +188,72 @@ fn doctor_reports_a_real_forward_pass() {
         .as_f64()
         .expect("timing");
     assert!(ms > 0.0 && ms.is_finite(), "{report}");
+}
+
+/// A config file of the older schema still runs, with a warning per moved
+/// key on standard error; the effective configuration is the new schema.
+#[test]
+fn an_old_schema_config_loads_with_warnings_saying_what_to_write() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("old.toml");
+    std::fs::write(
+        &file,
+        "[actor]\nscenario = \"left2\"\naction_set = \"ttg\"\n\
+         [learner]\nscenario = \"left2\"\nobservation = \"ttg\"\naction_set = \"ttg\"\n\
+         [train]\nactors = 3\n",
+    )
+    .expect("write");
+    let out = crossroads(&["--config", file.to_str().expect("utf-8"), "config", "show"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("`actor.scenario` is deprecated") && err.contains("`sim.scenario`"),
+        "{err}"
+    );
+    assert!(
+        err.contains("`train.actors`") && err.contains("`actor.count`"),
+        "{err}"
+    );
+    let shown: toml::Value = toml::from_str(&stdout(&out)).expect("stdout is TOML");
+    assert_eq!(shown["sim"]["scenario"].as_str(), Some("left2"));
+    assert_eq!(shown["actor"]["count"].as_integer(), Some(3));
+    assert!(shown["actor"].get("scenario").is_none(), "{shown}");
+
+    // Two scenarios for one run are refused, naming both keys.
+    std::fs::write(
+        &file,
+        "[actor]\nscenario = \"left\"\n[learner]\nscenario = \"right\"\n",
+    )
+    .expect("write");
+    let out = crossroads(&["--config", file.to_str().expect("utf-8"), "config", "show"]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("actor.scenario")
+            && err.contains("learner.scenario")
+            && err.contains("sim.scenario"),
+        "{err}"
+    );
+}
+
+/// A stated observation that is not what the actors of the scenario and
+/// action set produce is refused at start, saying what they produce.
+#[test]
+fn a_mismatched_observation_is_refused_by_every_role() {
+    let out = crossroads(&[
+        "--set",
+        "sim.scenario=occluded",
+        "--set",
+        "sim.observation=ttg",
+        "bench",
+        "learner",
+        "--rounds",
+        "1",
+    ]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("ttg-occlusion") && err.contains("sim.observation"),
+        "{err}"
+    );
 }

@@ -1,6 +1,7 @@
-//! The experiment configs in configs/experiments/: each is valid, and its
-//! learner reads what its actors observe, so `crossroads learner` and
-//! `crossroads actor` started from the same file agree.
+//! The experiment configs in configs/experiments/: each is valid, states
+//! what it simulates once (`[sim]`, no key of the older schema), and the
+//! observation it resolves to is what its actors produce, so `crossroads
+//! learner` and `crossroads actor` started from the same file agree.
 
 use std::sync::Arc;
 
@@ -21,18 +22,24 @@ fn every_experiment_config_is_valid_and_consistent() {
             .file(Some(&path))
             .load()
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let scenario = Arc::new(Scenario::load(&c.actor.scenario).expect("scenario"));
-        let actions: ActionSet = c.actor.action_set.parse().expect("action set");
+        let text = std::fs::read_to_string(&path).expect("read");
+        let table: toml::Table = text.parse().expect("toml");
+        for (old, new) in crossroads_config::MOVED_KEYS {
+            let (section, key) = old.split_once('.').expect("dotted");
+            assert!(
+                table.get(section).and_then(|s| s.get(key)).is_none(),
+                "{} states `{old}`; write `{new}`",
+                path.display()
+            );
+        }
+        let mut sim = c.sim.clone();
+        crossroads_actor::resolve_observation(&mut sim)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let scenario = Arc::new(Scenario::load(&c.sim.scenario).expect("scenario"));
+        let actions: ActionSet = c.sim.action_set.parse().expect("action set");
         let env = Env::new(scenario, EnvConfig::for_actions(actions));
         let kind = crossroads_actor::batch_spec(env.obs_spec()).kind;
-        assert_eq!(c.learner.observation, kind, "{}", path.display());
-        assert_eq!(
-            c.learner.action_set,
-            c.actor.action_set,
-            "{}",
-            path.display()
-        );
-        assert_eq!(c.learner.scenario, c.actor.scenario, "{}", path.display());
+        assert_eq!(sim.observation(), Some(kind.as_str()), "{}", path.display());
         let stem = path
             .file_stem()
             .expect("stem")
@@ -40,7 +47,7 @@ fn every_experiment_config_is_valid_and_consistent() {
             .into_owned();
         assert_eq!(
             stem,
-            format!("{}-{}", c.actor.action_set, c.actor.scenario),
+            format!("{}-{}", c.sim.action_set, c.sim.scenario),
             "file names say <actions>-<scenario>"
         );
         assert!(

@@ -71,12 +71,12 @@ fn checkpoints(learner: &str, args: &[&str]) -> Output {
         .expect("run crossroads checkpoints")
 }
 
-fn fill(replay: &str, config: &crossroads_config::LearnerConfig) {
+fn fill(replay: &str, config: &crossroads_config::Config) {
     let transport = TransportConfig {
         replay_endpoint: format!("http://{replay}"),
         ..TransportConfig::default()
     };
-    let spec = crossroads_learner::TrainerConfig::from_config(config)
+    let spec = crossroads_learner::TrainerConfig::from_config(&config.sim, &config.learner)
         .expect("valid")
         .spec;
     tokio::runtime::Builder::new_current_thread()
@@ -93,7 +93,7 @@ fn fill(replay: &str, config: &crossroads_config::LearnerConfig) {
 fn learner_args<'a>(replay: &'a str, dir: &'a Path) -> Vec<String> {
     vec![
         "--set".into(),
-        "learner.observation=sequential".into(),
+        "sim.action_set=sequential".into(),
         "--set".into(),
         "learner.hidden=[32]".into(),
         "--set".into(),
@@ -125,11 +125,10 @@ fn learner_and_checkpoints_commands_work_together() {
         ],
         "replay server listening",
     );
-    let config = crossroads_config::LearnerConfig {
-        observation: "sequential".to_owned(),
-        hidden: vec![32],
-        ..Default::default()
-    };
+    let mut config = crossroads_config::Config::default();
+    config.sim.action_set = "sequential".to_owned();
+    config.sim.observation = Some("sequential".to_owned());
+    config.learner.hidden = vec![32];
     fill(&replay_addr, &config);
 
     let ckpts = dir.path().join("ckpts");
@@ -246,7 +245,7 @@ fn bench_learner_prints_measured_figures() {
             "--set",
             "learner.hidden=[32]",
             "--set",
-            "learner.observation=sequential",
+            "sim.action_set=sequential",
         ])
         .args(["bench", "learner", "--rounds", "1", "--seconds", "0.2"])
         .args(["--fed-updates", "20", "--no-pytorch", "--json"])

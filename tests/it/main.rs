@@ -4,6 +4,7 @@
 mod cli;
 mod deploy;
 mod experiments;
+mod graph;
 mod learner;
 mod replay;
 mod reproduce;

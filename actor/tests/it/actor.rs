@@ -2,12 +2,12 @@
 //! per step, the epsilon ladder from the config, greedy evaluation.
 
 use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
-use crossroads_config::{ActorConfig, ConfigLoader};
 use crossroads_common::Shutdown;
+use crossroads_config::{ActorConfig, ConfigLoader, SimConfig};
 use crossroads_sim::Outcome;
 use crossroads_transport::grpc::ReplayClient;
 
-use crate::util::{actor, actor_config, batches, replay_config, transport};
+use crate::util::{actor, actor_config, actor_on, batches, replay_config, transport};
 
 #[test]
 fn training_fills_valid_batches_with_one_forward_pass_per_step() {
@@ -91,7 +91,7 @@ fn the_ladder_comes_from_index_and_count() {
     // Rungs over actors x envs: environment e of actor i is rung
     // i * envs + e of count * envs.
     let eps = |c: &ActorConfig, i, e| {
-        ActorSettings::from_config(c, i)
+        ActorSettings::from_config(&SimConfig::default(), c, i)
             .expect("settings")
             .mode
             .epsilon_of(e)
@@ -102,11 +102,12 @@ fn the_ladder_comes_from_index_and_count() {
     assert!((eps(&config, 1, 0) - ladder(config.envs as f64)).abs() < 1e-12);
     assert!((eps(&config, 1, 3) - ladder(config.envs as f64 + 3.0)).abs() < 1e-12);
     assert!((eps(&config, 7, config.envs - 1) - 0.4f64.powi(8)).abs() < 1e-15);
-    assert!(ActorSettings::from_config(&config, 8).is_err());
+    assert!(ActorSettings::from_config(&SimConfig::default(), &config, 8).is_err());
     config.count = 1;
     config.envs = 1;
     assert_eq!(eps(&config, 0, 0), 0.4);
     let a = ActorSettings::from_config(
+        &SimConfig::default(),
         &ActorConfig {
             count: 8,
             ..config.clone()
@@ -114,7 +115,12 @@ fn the_ladder_comes_from_index_and_count() {
         1,
     )
     .expect("settings");
-    let b = ActorSettings::from_config(&ActorConfig { count: 8, ..config }, 2).expect("settings");
+    let b = ActorSettings::from_config(
+        &SimConfig::default(),
+        &ActorConfig { count: 8, ..config },
+        2,
+    )
+    .expect("settings");
     assert_ne!(a.seed, b.seed, "each actor its own seed");
 }
 
@@ -215,12 +221,18 @@ fn the_q_network_drives_actors_of_every_kind() {
         ("occluded-60", "creep", "ttg-occlusion"),
         ("occluded-60", "sequential", "sequential-occlusion"),
     ] {
-        let config = ActorConfig {
+        let mut sim = SimConfig {
             scenario: scenario.to_owned(),
             action_set: action_set.to_owned(),
-            ..actor_config(3, 16)
+            observation: None,
         };
-        let (mut a, _) = actor(&config, 0);
+        crossroads_actor::resolve_observation(&mut sim).expect("resolves");
+        assert_eq!(
+            sim.observation(),
+            Some(kind),
+            "{scenario} with {action_set}"
+        );
+        let (mut a, _) = actor_on(&sim, &actor_config(3, 16), 0);
         let spec = NetworkSpec::new(kind, action_set, TrunkKind::Mlp, vec![32]).expect("spec");
         let mut net = QNetwork::new(spec, 7).expect("network");
         let mut got = Vec::new();

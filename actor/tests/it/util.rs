@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use crossroads_actor::{ActionValues, Actor, ActorMetrics, ActorSettings, ValuesError};
 use crossroads_config::TransportConfig;
-use crossroads_config::{ActorConfig, Config};
+use crossroads_config::{ActorConfig, Config, SimConfig};
 use crossroads_types::TransitionBatch;
 
 /// Q(s, a) = bias[a] + scale[a] * sum(s): cheap, deterministic, and
@@ -61,7 +61,6 @@ impl ActionValues for LinearValues {
 
 pub fn actor_config(envs: usize, batch_size: usize) -> ActorConfig {
     ActorConfig {
-        scenario: "left".to_owned(),
         envs,
         batch_size,
         n_step: 3,
@@ -69,10 +68,15 @@ pub fn actor_config(envs: usize, batch_size: usize) -> ActorConfig {
     }
 }
 
-/// A training actor and a network for it.
+/// A training actor on left with TTG actions and a network for it.
 pub fn actor(config: &ActorConfig, index: u32) -> (Actor, LinearValues) {
-    let settings = ActorSettings::from_config(config, index).expect("settings");
-    let metrics = ActorMetrics::new(None, &config.scenario).expect("metrics");
+    actor_on(&SimConfig::default(), config, index)
+}
+
+/// A training actor of `sim`'s scenario and actions and a network for it.
+pub fn actor_on(sim: &SimConfig, config: &ActorConfig, index: u32) -> (Actor, LinearValues) {
+    let settings = ActorSettings::from_config(sim, config, index).expect("settings");
+    let metrics = ActorMetrics::new(None, &sim.scenario).expect("metrics");
     let actor = Actor::new(settings, metrics).expect("actor");
     let values = LinearValues::new(actor.envs().obs_len(), actor.envs().num_actions());
     (actor, values)

@@ -11,8 +11,8 @@ use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, LiveNetwork, PushConfig, Pusher, RunReport,
     WeightsSlot, WeightsSubscription, WeightsUpdate,
 };
-use crossroads_config::{ActorTransport, Config};
 use crossroads_common::Shutdown;
+use crossroads_config::{ActorTransport, Config, SimConfig};
 use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 
@@ -25,7 +25,7 @@ fn small_spec() -> NetworkSpec {
 /// A training actor on left with a small network following `slot`.
 fn live_actor(slot: &WeightsSlot) -> (Actor, LiveNetwork, ActorMetrics) {
     let config = actor_config(4, 32);
-    let settings = ActorSettings::from_config(&config, 0).expect("settings");
+    let settings = ActorSettings::from_config(&SimConfig::default(), &config, 0).expect("settings");
     let metrics = ActorMetrics::new(None, "left").expect("metrics");
     let actor = Actor::new(settings, metrics.clone()).expect("actor");
     let net = QNetwork::new(small_spec(), 1).expect("network");
@@ -75,8 +75,8 @@ async fn a_running_actor_follows_a_real_learner_over_grpc_and_outlives_it() {
     let replay_url = format!("http://{}", replay.local_addr());
     config.transport = transport(&replay_url, "unused");
     config.learner.listen = ([127, 0, 0, 1], 0).into();
-    config.learner.observation = "ttg".to_owned();
-    config.learner.action_set = "ttg".to_owned();
+    config.sim.observation = Some("ttg".to_owned());
+    config.sim.action_set = "ttg".to_owned();
     config.learner.hidden = vec![32, 32];
     config.learner.batch_size = 16;
     config.learner.publish_every = 10;

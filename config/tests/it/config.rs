@@ -221,3 +221,133 @@ fn replay_and_transport_sections_have_valid_defaults_and_checked_ranges() {
     );
     assert_eq!(config.replay.listen.port(), 0);
 }
+
+/// A file of the older schema: scenario and action set under both
+/// `[actor]` and `[learner]`, the observation under `[learner]`, the actor
+/// count as `train.actors`.
+const OLD_SCHEMA: &str = r#"
+[actor]
+scenario = "right"
+action_set = "sequential"
+envs = 4
+
+[learner]
+scenario = "right"
+observation = "sequential"
+action_set = "sequential"
+
+[train]
+actors = 3
+"#;
+
+#[test]
+fn old_schema_files_load_with_a_warning_per_moved_key() {
+    let f = toml_file(OLD_SCHEMA);
+    let (config, notes) = ConfigLoader::new()
+        .without_env()
+        .file(Some(f.path()))
+        .load_with_notes()
+        .expect("an old file still loads");
+    assert_eq!(config.sim.scenario, "right");
+    assert_eq!(config.sim.action_set, "sequential");
+    assert_eq!(config.sim.observation(), Some("sequential"));
+    assert_eq!(config.actor.count, 3);
+    assert_eq!(config.actor.envs, 4, "other keys untouched");
+    assert_eq!(notes.len(), 6, "{notes:#?}");
+    for (old, new) in crossroads_config::MOVED_KEYS {
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.contains(&format!("`{old}`")) && n.contains(&format!("`{new}`"))),
+            "no warning for {old}: {notes:#?}"
+        );
+    }
+    assert!(notes[0].contains("config file"), "{}", notes[0]);
+    // The effective config is written in the new schema only.
+    let shown = config.to_toml();
+    assert!(shown.contains("[sim]"), "{shown}");
+    assert!(!shown.contains("actors ="), "{shown}");
+}
+
+#[test]
+fn a_current_file_loads_without_warnings() {
+    let f = toml_file("[sim]\nscenario = \"right\"\n[actor]\ncount = 2\n");
+    let (config, notes) = ConfigLoader::new()
+        .without_env()
+        .file(Some(f.path()))
+        .load_with_notes()
+        .expect("valid");
+    assert!(notes.is_empty(), "{notes:#?}");
+    assert_eq!(config.sim.scenario, "right");
+    assert_eq!(config.sim.observation(), None, "derived by the roles");
+}
+
+#[test]
+fn old_keys_that_disagree_are_refused_naming_both() {
+    let (_f, result) = load("[actor]\nscenario = \"left\"\n[learner]\nscenario = \"right\"\n");
+    let err = result.expect_err("two scenarios");
+    let text = err.to_string();
+    assert!(text.contains("actor.scenario"), "{text}");
+    assert!(text.contains("learner.scenario"), "{text}");
+    assert!(text.contains("sim.scenario"), "{text}");
+    assert!(
+        text.contains("\"left\"") && text.contains("\"right\""),
+        "{text}"
+    );
+}
+
+#[test]
+fn an_old_key_that_contradicts_the_new_one_is_refused() {
+    let (_f, result) = load("[sim]\naction_set = \"creep\"\n[actor]\naction_set = \"ttg\"\n");
+    let err = result.expect_err("two action sets");
+    let p = problems(&err);
+    assert_eq!(p.len(), 1, "{p:#?}");
+    assert_eq!(p[0].1, "actor.action_set");
+    assert!(p[0].0.starts_with("config file"), "{p:#?}");
+    assert!(
+        p[0].2.contains("sim.action_set") && p[0].2.contains("remove"),
+        "{p:#?}"
+    );
+    // The same value in both places is only redundant.
+    let (_f, result) = load("[sim]\naction_set = \"creep\"\n[actor]\naction_set = \"creep\"\n");
+    assert_eq!(result.expect("agrees").sim.action_set, "creep");
+}
+
+#[test]
+fn an_old_key_from_the_environment_or_set_flag_is_moved_too() {
+    let config = ConfigLoader::new()
+        .without_env()
+        .sets(["train.actors=5", "learner.observation=ttg-occlusion"])
+        .load()
+        .expect("loads");
+    assert_eq!(config.actor.count, 5);
+    assert_eq!(config.sim.observation(), Some("ttg-occlusion"));
+}
+
+#[test]
+fn the_run_configs_committed_before_the_sim_section_still_load() {
+    let runs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../reports/paper/runs");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&runs).expect("reports/paper/runs") {
+        let path = entry.expect("entry").path().join("config.toml");
+        if !path.exists() {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).expect("read");
+        let old: toml::Table = text.parse().expect("toml");
+        let (config, _) = ConfigLoader::new()
+            .without_env()
+            .file(Some(&path))
+            .load_with_notes()
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        if let Some(scenario) = old
+            .get("actor")
+            .and_then(|a| a.get("scenario"))
+            .and_then(|s| s.as_str())
+        {
+            assert_eq!(config.sim.scenario, scenario, "{}", path.display());
+        }
+        seen += 1;
+    }
+    assert!(seen >= 10, "only {seen} run configs found");
+}

@@ -65,7 +65,11 @@ fn learner_weights_load_in_python_safetensors() {
         hidden: vec![8, 16, 64],
         ..Default::default()
     };
-    let trainer = Trainer::new(TrainerConfig::from_config(&config).unwrap()).unwrap();
+    let sim = crossroads_config::SimConfig {
+        observation: Some("ttg".to_owned()),
+        ..Default::default()
+    };
+    let trainer = Trainer::new(TrainerConfig::from_config(&sim, &config).unwrap()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let store = CheckpointStore::open(dir.path(), 1, "success_rate").unwrap();
     let state = trainer.state(17).unwrap();

@@ -5,8 +5,8 @@
 use std::path::Path;
 use std::time::Duration;
 
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
 use crossroads_learner::bench::fill_replay;
 use crossroads_learner::{RunningLearner, TrainerConfig};
 use crossroads_transport::LearnerClient;
@@ -33,7 +33,7 @@ async fn replay_with_data(config: &Config) -> Replay {
     let mut transport = c.transport.clone();
     transport.replay_endpoint = format!("http://{}", server.local_addr());
     let client = ReplayClient::new(&transport, &c.replay.table).expect("test setup");
-    let spec = TrainerConfig::from_config(&c.learner)
+    let spec = TrainerConfig::from_config(&c.sim, &c.learner)
         .expect("test setup")
         .spec;
     fill_replay(&client, &spec, 2_000)
@@ -45,8 +45,8 @@ async fn replay_with_data(config: &Config) -> Replay {
 fn learner_config(checkpoints: &Path) -> Config {
     let mut c = Config::default();
     c.learner.listen = ([127, 0, 0, 1], 0).into();
-    c.learner.observation = "sequential".to_owned();
-    c.learner.action_set = "ttg".to_owned();
+    c.sim.observation = Some("sequential".to_owned());
+    c.sim.action_set = "ttg".to_owned();
     c.learner.hidden = vec![32, 32];
     c.learner.batch_size = 16;
     c.learner.publish_every = 5;
@@ -282,7 +282,7 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
     let config = learner_config(&dir.path().join("ckpts"));
     let replay = replay_with_data(&config).await;
     let mut other = config.clone();
-    other.learner.observation = "ttg".to_owned();
+    other.sim.observation = Some("ttg".to_owned());
     other.learner.resume = false;
     other.learner.checkpoint_dir = None;
     let learner = start_learner(&other, &replay, None).await;
@@ -292,7 +292,7 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
         text.contains("sequential") && text.contains("ttg"),
         "{text}"
     );
-    assert!(text.contains("learner.observation"), "{text}");
+    assert!(text.contains("sim.observation"), "{text}");
     replay.shutdown.trigger();
     replay.server.join().await.unwrap();
 }

@@ -4,9 +4,9 @@
 
 use std::time::Duration;
 
-use crossroads_config::TransportConfig;
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
+use crossroads_config::TransportConfig;
 use crossroads_replay::{RunningServer, TableImage};
 use crossroads_transport::grpc::{ClientError, ReplayClient};
 use crossroads_types::{RejectReason, TransitionBatch};

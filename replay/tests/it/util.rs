@@ -2,9 +2,9 @@
 
 use std::time::Duration;
 
-use crossroads_config::WeightNormalization;
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
+use crossroads_config::WeightNormalization;
 use crossroads_replay::rate_limiter::RateLimiterConfig;
 use crossroads_replay::{PreparedBatch, Table, TableConfig, TableMetrics};
 use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};

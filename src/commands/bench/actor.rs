@@ -17,8 +17,8 @@ use anyhow::Context;
 use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, PushConfig, Pusher, hostname,
 };
-use crossroads_config::{ActorTransport, Config};
 use crossroads_common::Shutdown;
+use crossroads_config::{ActorTransport, Config};
 use crossroads_learner::bench::median;
 use crossroads_model::QNetwork;
 use crossroads_replay::{PreparedBatch, Table};
@@ -124,15 +124,15 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
             cells.push(cell);
         }
     }
-    let spec = crossroads_learner::network_spec(&config.learner)?;
+    let spec = crossroads_learner::network_spec(&config.sim, &config.learner)?;
     let network = describe_network(&spec);
     let load = load_average();
     if o.json {
         println!(
             "{}",
             serde_json::json!({
-                "scenario": config.actor.scenario,
-                "action_set": config.actor.action_set,
+                "scenario": config.sim.scenario,
+                "action_set": config.sim.action_set,
                 "network": network,
                 "batch_size": config.actor.batch_size,
                 "n_step": config.actor.n_step,
@@ -148,8 +148,8 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     } else {
         println!(
             "actor throughput on {} ({} actions), {network}, batches of {}, {}-step; rayon {} threads, libtorch {}; median of {} rounds of {:.1} s (load average {load})",
-            config.actor.scenario,
-            config.actor.action_set,
+            config.sim.scenario,
+            config.sim.action_set,
             config.actor.batch_size,
             config.actor.n_step,
             rayon::current_num_threads(),
@@ -194,10 +194,10 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         .table(&c.replay.table)
         .context("the replay server has no table")?;
 
-    let metrics = ActorMetrics::new(None, &c.actor.scenario)?;
-    let settings = ActorSettings::from_config(&c.actor, 0)?;
+    let metrics = ActorMetrics::new(None, &c.sim.scenario)?;
+    let settings = ActorSettings::from_config(&c.sim, &c.actor, 0)?;
     let mut actor = Actor::new(settings, metrics.clone())?;
-    let spec = crossroads_learner::network_spec(&c.learner)?;
+    let spec = crossroads_learner::network_spec(&c.sim, &c.learner)?;
     let mut net = Timed {
         net: QNetwork::new(spec, c.learner.seed)?,
         busy: Duration::ZERO,

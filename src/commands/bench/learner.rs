@@ -8,8 +8,8 @@ use std::process::{Command, ExitCode};
 use std::time::Duration;
 
 use anyhow::Context;
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
 use crossroads_learner::TrainerConfig;
 use crossroads_learner::bench::{FedReport, fed, fill_replay, updates_per_second};
 use crossroads_learner::optimizer::OptimizerConfig;
@@ -57,7 +57,7 @@ fn script() -> Option<PathBuf> {
 
 /// Runs the PyTorch twin; `Err` says why it could not.
 fn pytorch(config: &Config, o: &Options) -> Result<serde_json::Value, String> {
-    let spec = TrainerConfig::from_config(&config.learner)
+    let spec = TrainerConfig::from_config(&config.sim, &config.learner)
         .map_err(|e| e.to_string())?
         .spec;
     if spec.trunk != crossroads_model::TrunkKind::Mlp {
@@ -116,7 +116,7 @@ async fn fed_runs(config: &Config, o: &Options) -> anyhow::Result<Vec<(u32, FedR
         .context("starting a replay server")?;
     c.transport.replay_endpoint = format!("http://{}", server.local_addr());
     let client = ReplayClient::new(&c.transport, &c.replay.table)?;
-    let spec = TrainerConfig::from_config(&c.learner)?.spec;
+    let spec = TrainerConfig::from_config(&c.sim, &c.learner)?.spec;
     fill_replay(&client, &spec, 20_000)
         .await
         .context("filling the replay server")?;
@@ -143,7 +143,7 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     for &b in &o.batches {
         let mut l = config.learner.clone();
         l.batch_size = b;
-        memory.push(updates_per_second(&l, o.rounds, round)?);
+        memory.push(updates_per_second(&config.sim, &l, o.rounds, round)?);
     }
 
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -166,7 +166,7 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
         }
     };
 
-    let spec = TrainerConfig::from_config(&config.learner)?.spec;
+    let spec = TrainerConfig::from_config(&config.sim, &config.learner)?.spec;
     let network = format!(
         "{} actions ({}), {}",
         super::describe_network(&spec),

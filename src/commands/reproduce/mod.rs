@@ -388,7 +388,7 @@ fn check_mode(plan: &Plan) -> anyhow::Result<()> {
 fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> anyhow::Result<()> {
     let dir = plan.run_dir(&experiments::member_run(experiment, member));
     if let Some(s) = Summary::load(&dir)?
-        && matches!(s.status.as_str(), "finished" | "target")
+        && s.status.is_complete()
     {
         eprintln!(
             "  reusing {} ({}, {} updates, {:.1} min)",

@@ -1,7 +1,8 @@
 //! The role processes of a training run: this very binary started as
 //! `crossroads replay`, `learner` and `actor`, each in its own process
 //! group (so Ctrl-C reaches only `train`, which then stops them in order),
-//! each logging into its own file under the run folder.
+//! each logging into its own file under the run folder; the addresses they
+//! are given, and waiting until one answers.
 
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
@@ -9,6 +10,7 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use crossroads_common::Shutdown;
 use rustix::process::{Pid, Signal, kill_process};
 
 /// A free TCP port on loopback (bound, read, released; the role binds it
@@ -20,7 +22,7 @@ pub fn free_port() -> anyhow::Result<SocketAddr> {
 
 /// One role process.
 #[derive(Debug)]
-pub struct Role {
+pub struct RoleProcess {
     /// `replay`, `learner`, `actor-3`.
     pub name: String,
     /// Its `/metrics` address.
@@ -31,7 +33,7 @@ pub struct Role {
     exited: Option<ExitStatus>,
 }
 
-impl Role {
+impl RoleProcess {
     /// Starts `exe --config config <args>` with `env` added, standard
     /// output and error appended to `log`.
     pub fn spawn(
@@ -109,11 +111,113 @@ impl Role {
     }
 }
 
-impl Drop for Role {
+impl Drop for RoleProcess {
     fn drop(&mut self) {
         if self.exited().is_none() {
             let _ = self.child.kill();
             let _ = self.child.wait();
         }
     }
+}
+
+/// The addresses of one session's roles.
+pub struct Addresses {
+    pub replay: SocketAddr,
+    pub learner: SocketAddr,
+    pub shm_prefix: String,
+}
+
+impl Addresses {
+    /// Free loopback ports for the replay and the learner, and iceoryx2
+    /// service names unique to this run folder and process.
+    pub fn pick(out: &Path) -> anyhow::Result<Self> {
+        let name = out
+            .file_name()
+            .map_or("run".into(), |n| n.to_string_lossy().into_owned());
+        let name: String = name
+            .chars()
+            .map(|ch| if ch.is_ascii_alphanumeric() { ch } else { '-' })
+            .collect();
+        Ok(Self {
+            replay: free_port()?,
+            learner: free_port()?,
+            shm_prefix: format!("crossroads/train-{name}-{}", std::process::id()),
+        })
+    }
+
+    /// The variables every role gets (they override the file). The roles
+    /// share this machine's cores, so libgomp's threads sleep instead of
+    /// spinning while they wait (unless the user chose otherwise): spinning
+    /// threads of one role starve the others.
+    pub fn env(&self) -> Vec<(String, String)> {
+        let mut env = Vec::new();
+        if std::env::var_os("OMP_WAIT_POLICY").is_none() {
+            env.push(("OMP_WAIT_POLICY".into(), "passive".into()));
+        }
+        env.extend([
+            ("CROSSROADS_REPLAY__LISTEN".into(), self.replay.to_string()),
+            (
+                "CROSSROADS_TRANSPORT__REPLAY_ENDPOINT".into(),
+                format!("http://{}", self.replay),
+            ),
+            (
+                "CROSSROADS_LEARNER__LISTEN".into(),
+                self.learner.to_string(),
+            ),
+            (
+                "CROSSROADS_TRANSPORT__LEARNER_ENDPOINT".into(),
+                format!("http://{}", self.learner),
+            ),
+            (
+                "CROSSROADS_TRANSPORT__SHM_PREFIX".into(),
+                self.shm_prefix.clone(),
+            ),
+        ]);
+        env
+    }
+}
+
+/// Waits until `probe` answers, failing early when the role exits (with
+/// the end of its log) or after two minutes.
+pub async fn wait_ready<F, Fut>(
+    role: &mut RoleProcess,
+    shutdown: &Shutdown,
+    probe: F,
+) -> anyhow::Result<()>
+where
+    F: Fn() -> Fut,
+    Fut: Future<Output = Result<(), String>>,
+{
+    let start = Instant::now();
+    loop {
+        if let Some(status) = role.exited() {
+            anyhow::bail!(
+                "{} exited ({status}) before it was ready; the end of {}:\n{}",
+                role.name,
+                role.log.display(),
+                role.log_tail(20)
+            );
+        }
+        match probe().await {
+            Ok(()) => return Ok(()),
+            Err(e) if start.elapsed() > Duration::from_secs(120) => {
+                anyhow::bail!("{} not ready after 2 minutes: {e}", role.name)
+            }
+            Err(_) => {}
+        }
+        if shutdown.is_triggered() {
+            anyhow::bail!("stopped before {} was ready", role.name);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+/// The error of a role that exited on its own, with the end of its log.
+pub fn died(role: &RoleProcess, status: ExitStatus) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{} exited ({status}); the end of {}:\n{}",
+        role.name,
+        role.log.display(),
+        role.log_tail(20)
+    )
 }

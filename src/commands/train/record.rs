@@ -75,6 +75,43 @@ pub struct Reached {
     pub evaluation: Evaluation,
 }
 
+/// Where a run stands, as `summary.json` records it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RunStatus {
+    /// A session is training it.
+    #[default]
+    Running,
+    /// It ended at its update or time budget.
+    Finished,
+    /// It stopped at the target (`train.stop_at_target`).
+    Target,
+    /// Ctrl-C or SIGTERM stopped it; `--resume` continues it.
+    Stopped,
+    /// A role failed; the logs say why.
+    Failed,
+}
+
+impl RunStatus {
+    /// Whether the run ended as planned (budget or target), so its weights
+    /// are final.
+    pub fn is_complete(self) -> bool {
+        matches!(self, RunStatus::Finished | RunStatus::Target)
+    }
+}
+
+impl std::fmt::Display for RunStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            RunStatus::Running => "running",
+            RunStatus::Finished => "finished",
+            RunStatus::Target => "target",
+            RunStatus::Stopped => "stopped",
+            RunStatus::Failed => "failed",
+        })
+    }
+}
+
 /// `summary.json`: the state of a run, rewritten after every evaluation
 /// and at the end; `--resume` continues its clocks.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -87,9 +124,8 @@ pub struct Summary {
     pub observation: String,
     /// Actor processes.
     pub actors: u32,
-    /// `running`, `finished` (budget), `stopped` (Ctrl-C), `target`
-    /// (stopped at the target) or `failed`.
-    pub status: String,
+    /// Where the run stands.
+    pub status: RunStatus,
     /// Wall-clock seconds over all sessions.
     pub wall_seconds: f64,
     /// Learner updates.

@@ -1,0 +1,81 @@
+//! `[sim]`: what every role of a run simulates and learns on, stated once:
+//! the scenario, the action set and the observation the network reads.
+//! Actors step this scenario with these actions; the learner builds its
+//! network for this observation and these actions and records the scenario
+//! in checkpoints.
+
+use serde::{Deserialize, Serialize};
+
+use super::{ACTION_SETS, Checks};
+
+/// Observation layouts the network can read (`crossroads_types`'s
+/// `ObservationLayout::named`; this crate does not depend on it).
+pub(crate) const OBSERVATIONS: [&str; 4] =
+    ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
+
+/// What a run simulates.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    /// Scenario: a built-in name (`crossroads scenarios`) or a TOML file.
+    pub scenario: String,
+    /// Action set: `ttg` (5), `sequential` (12) or `creep` (3).
+    pub action_set: String,
+    /// Observation the network reads: `ttg`, `ttg-occlusion`, `sequential`
+    /// or `sequential-occlusion`. Unset: the paper's pairing, derived when a
+    /// role loads the scenario (the Sequential grid for Sequential actions,
+    /// the TTG grid otherwise; occlusion channels when the scenario has
+    /// occluders). Set, it must be that pairing: the actors produce it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub observation: Option<String>,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            scenario: "left".to_owned(),
+            action_set: "ttg".to_owned(),
+            observation: None,
+        }
+    }
+}
+
+impl SimConfig {
+    /// Fills `observation` with `produced`, the observation the actors of
+    /// this scenario and action set produce, or checks that the one given
+    /// is that.
+    pub fn resolve_observation(&mut self, produced: &str) -> Result<(), String> {
+        match &self.observation {
+            Some(given) if given != produced => Err(format!(
+                "sim.observation = {given:?}, but scenario {:?} with {:?} actions produces \
+                 {produced:?}; remove sim.observation (it is derived) or change the scenario \
+                 or the action set",
+                self.scenario, self.action_set
+            )),
+            _ => {
+                self.observation = Some(produced.to_owned());
+                Ok(())
+            }
+        }
+    }
+
+    /// The observation, once resolved (see [`Self::resolve_observation`]).
+    pub fn observation(&self) -> Option<&str> {
+        self.observation.as_deref()
+    }
+
+    /// Range checks, each with its dotted key.
+    pub fn validate(&self) -> Vec<(String, String)> {
+        let mut problems = Checks::new("sim");
+        problems.check(
+            !self.scenario.is_empty(),
+            "scenario",
+            "must name a scenario".to_owned(),
+        );
+        problems.one_of("action_set", &self.action_set, &ACTION_SETS);
+        if let Some(observation) = &self.observation {
+            problems.one_of("observation", observation, &OBSERVATIONS);
+        }
+        problems.into_vec()
+    }
+}

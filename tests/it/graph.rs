@@ -1,0 +1,98 @@
+//! The invariants the crate graph states (ARCHITECTURE.md, "Invariants"),
+//! checked on the graph itself: `cargo tree` of each crate's normal
+//! (non-dev) dependencies, so a new dependency that breaks one fails here.
+
+use std::collections::BTreeSet;
+use std::process::Command;
+
+/// Every package `package` links in a normal build, transitively.
+fn normal_dependencies(package: &str) -> BTreeSet<String> {
+    let out = Command::new(env!("CARGO"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["tree", "--offline", "-e", "normal", "--prefix", "none"])
+        .args(["--format", "{p}", "-p", package])
+        .output()
+        .expect("run cargo tree");
+    assert!(
+        out.status.success(),
+        "cargo tree -p {package}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_owned)
+        .collect()
+}
+
+#[test]
+fn the_crate_graph_keeps_each_crate_to_its_part() {
+    // (crate, what it must never link, why)
+    let rules: [(&str, &[&str], &str); 8] = [
+        (
+            "crossroads-sim",
+            &["tch", "torch-sys", "tokio", "tonic"],
+            "the simulator knows nothing of learning or networking",
+        ),
+        (
+            "crossroads-types",
+            &["tch", "torch-sys", "tonic", "prost"],
+            "domain types are plain data",
+        ),
+        (
+            "crossroads-config",
+            &[
+                "tch",
+                "torch-sys",
+                "tonic",
+                "prost",
+                "crossroads-types",
+                "crossroads-common",
+            ],
+            "every role reads the schema; it depends on none of ours",
+        ),
+        (
+            "crossroads-common",
+            &[
+                "tch",
+                "torch-sys",
+                "tonic",
+                "prost",
+                "iceoryx2",
+                "crossroads-proto",
+            ],
+            "run-time plumbing only",
+        ),
+        (
+            "crossroads-transport",
+            &["tch", "torch-sys"],
+            "conversations carry bytes and domain types, never tensors",
+        ),
+        (
+            "crossroads-replay",
+            &["tch", "torch-sys", "crossroads-learner", "crossroads-sim"],
+            "the replay stores transitions without a network or a simulator",
+        ),
+        (
+            "crossroads-actor",
+            &["crossroads-learner"],
+            "actors never see optimizer state",
+        ),
+        (
+            "crossroads-learner",
+            &["crossroads-sim", "crossroads-actor"],
+            "the learner never steps a simulator",
+        ),
+    ];
+    for (package, never, why) in rules {
+        let deps = normal_dependencies(package);
+        assert!(deps.len() > 2, "{package}: no dependencies read: {deps:?}");
+        for forbidden in never {
+            assert!(
+                !deps.contains(*forbidden),
+                "{package} links {forbidden}, but {why}"
+            );
+        }
+    }
+}
