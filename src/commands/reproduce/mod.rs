@@ -244,7 +244,7 @@ impl Cell {
 /// Table I, one scenario: TTC (with its threshold), DQN-Sequential,
 /// DQN-TTG, and DQN-TTG behind the safety shield (not in the paper).
 #[derive(Debug, Clone, Default, Serialize)]
-pub struct Row1 {
+pub struct Table1Row {
     pub scenario: String,
     pub ttc_threshold: Option<f64>,
     pub ttc: Option<Cell>,
@@ -258,7 +258,7 @@ pub struct Row1 {
 
 /// Table II, one occluder length.
 #[derive(Debug, Clone, Default, Serialize)]
-pub struct Row2 {
+pub struct Table2Row {
     pub length_m: u32,
     pub ttc_threshold: Option<f64>,
     pub ttc_creep: Option<Cell>,
@@ -290,8 +290,8 @@ pub struct Results {
     /// `--baselines-only`: no network was trained or evaluated.
     pub baselines_only: bool,
     pub machine: String,
-    pub table1: Vec<Row1>,
-    pub table2: Vec<Row2>,
+    pub table1: Vec<Table1Row>,
+    pub table2: Vec<Table2Row>,
     /// Row = tested on, column = trained on, in [`paper::SCENARIOS`] order.
     pub table3: Vec<Vec<Option<Cell>>>,
     /// TTC sweeps by scenario (`left`, `occluded-60`, ...).
@@ -530,7 +530,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
     for &s in open_scenarios(plan) {
         {
             let ttc = r.sweeps.iter().find(|w| w.scenario == s && !w.creep);
-            r.table1.push(Row1 {
+            r.table1.push(Table1Row {
                 scenario: s.to_owned(),
                 ttc_threshold: ttc.and_then(|w| w.best.as_ref()).map(|b| b.threshold),
                 ttc: ttc.and_then(|w| w.best.as_ref().map(|b| Cell::of_sweep(b, w.trials))),
@@ -549,7 +549,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
         for len in paper::OCCLUSION_LENGTHS {
             let s = format!("occluded-{len}");
             let ttc = r.sweeps.iter().find(|w| w.scenario == s && w.creep);
-            r.table2.push(Row2 {
+            r.table2.push(Table2Row {
                 length_m: len,
                 ttc_threshold: ttc.and_then(|w| w.best.as_ref()).map(|b| b.threshold),
                 ttc_creep: ttc.and_then(|w| w.best.as_ref().map(|b| Cell::of_sweep(b, w.trials))),

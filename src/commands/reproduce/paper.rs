@@ -13,15 +13,15 @@ pub const OCCLUSION_LENGTHS: [u32; 3] = [30, 60, 90];
 
 /// One method's line in Table I: success %, collision %, time s, brake s.
 #[derive(Debug, Clone, Copy)]
-pub struct Row1 {
+pub struct PaperRow1 {
     pub success: f64,
     pub collision: f64,
     pub time: f64,
     pub brake: f64,
 }
 
-const fn r1(success: f64, collision: f64, time: f64, brake: f64) -> Row1 {
-    Row1 {
+const fn r1(success: f64, collision: f64, time: f64, brake: f64) -> PaperRow1 {
+    PaperRow1 {
         success,
         collision,
         time,
@@ -31,7 +31,7 @@ const fn r1(success: f64, collision: f64, time: f64, brake: f64) -> Row1 {
 
 /// Table I per scenario (in [`SCENARIOS`] order): TTC, DQN-Sequential,
 /// DQN-TTG.
-pub const TABLE1: [[Row1; 3]; 5] = [
+pub const TABLE1: [[PaperRow1; 3]; 5] = [
     [
         r1(99.61, 0.0, 6.46, 0.31),
         r1(99.5, 0.47, 5.47, 0.88),
@@ -61,14 +61,14 @@ pub const TABLE1: [[Row1; 3]; 5] = [
 
 /// One method's line in Table II: success %, collision %, time s.
 #[derive(Debug, Clone, Copy)]
-pub struct Row2 {
+pub struct PaperRow2 {
     pub success: f64,
     pub collision: f64,
     pub time: f64,
 }
 
-const fn r2(success: f64, collision: f64, time: f64) -> Row2 {
-    Row2 {
+const fn r2(success: f64, collision: f64, time: f64) -> PaperRow2 {
+    PaperRow2 {
         success,
         collision,
         time,
@@ -77,7 +77,7 @@ const fn r2(success: f64, collision: f64, time: f64) -> Row2 {
 
 /// Table II per occluder length (in [`OCCLUSION_LENGTHS`] order): TTC with
 /// creep, DQN-TTG, DQN-Creep, DQN-Sequential.
-pub const TABLE2: [[Row2; 4]; 3] = [
+pub const TABLE2: [[PaperRow2; 4]; 3] = [
     [
         r2(84.1, 0.0, 28.6),
         r2(70.7, 29.2, 12.0),

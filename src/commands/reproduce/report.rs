@@ -94,11 +94,11 @@ const METRICS1: [(&str, usize); 4] = [
     ("brake s", 2),
 ];
 
-fn paper1(p: &paper::Row1) -> [f64; 4] {
+fn paper1(p: &paper::PaperRow1) -> [f64; 4] {
     [p.success, p.collision, p.time, p.brake]
 }
 
-fn paper2(p: &paper::Row2) -> [f64; 3] {
+fn paper2(p: &paper::PaperRow2) -> [f64; 3] {
     [p.success, p.collision, p.time]
 }
 
