@@ -122,16 +122,8 @@ impl ActorConfig {
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("actor");
-        problems.check(
-            (1..=4096).contains(&self.envs),
-            "envs",
-            format!("must be between 1 and 4096, got {}", self.envs),
-        );
-        problems.check(
-            (1..=64).contains(&self.n_step),
-            "n_step",
-            format!("must be between 1 and 64, got {}", self.n_step),
-        );
+        problems.within("envs", self.envs, 1..=4096);
+        problems.within("n_step", self.n_step, 1..=64);
         problems.check(
             self.gamma > 0.0 && self.gamma <= 1.0,
             "gamma",
@@ -144,16 +136,8 @@ impl ActorConfig {
                 format!("must be finite and at most 0, got {r}"),
             );
         }
-        problems.check(
-            (1..=16_384).contains(&self.batch_size),
-            "batch_size",
-            format!("must be between 1 and 16384, got {}", self.batch_size),
-        );
-        problems.check(
-            (1..=256).contains(&self.count),
-            "count",
-            format!("must be between 1 and 256, got {}", self.count),
-        );
+        problems.within("batch_size", self.batch_size, 1..=16_384);
+        problems.within("count", self.count, 1..=256);
         if let Some(index) = self.index {
             problems.check(
                 index < self.count,
@@ -176,11 +160,7 @@ impl ActorConfig {
             "buffer_batches",
             "must be at least 1".to_owned(),
         );
-        problems.check(
-            (1..=1024).contains(&self.in_flight),
-            "in_flight",
-            format!("must be between 1 and 1024, got {}", self.in_flight),
-        );
+        problems.within("in_flight", self.in_flight, 1..=1024);
         problems.into_vec()
     }
 }

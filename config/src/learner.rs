@@ -207,11 +207,7 @@ impl LearnerConfig {
                 self.hidden
             ),
         );
-        problems.check(
-            (1..=65_536).contains(&self.batch_size),
-            "batch_size",
-            format!("must be between 1 and 65536, got {}", self.batch_size),
-        );
+        problems.within("batch_size", self.batch_size, 1..=65_536);
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let fraction = |v: f64| (0.0..1.0).contains(&v);
         for (key, v) in [
@@ -266,11 +262,7 @@ impl LearnerConfig {
             "priority_eps",
             format!("must be finite and at least 0, got {}", self.priority_eps),
         );
-        problems.check(
-            (1..=64).contains(&self.prefetch),
-            "prefetch",
-            format!("must be between 1 and 64, got {}", self.prefetch),
-        );
+        problems.within("prefetch", self.prefetch, 1..=64);
         problems.check(
             self.publish_every >= 1,
             "publish_every",

@@ -9,6 +9,7 @@
 //! problem.
 
 use std::fmt;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use figment::providers::{Env, Format, Serialized, Toml};
@@ -51,6 +52,19 @@ impl Checks {
             self.problems
                 .push((format!("{}.{key}", self.section), problem));
         }
+    }
+
+    /// Records a problem unless `value` lies in `range` (both ends in).
+    pub(crate) fn within<T>(&mut self, key: &str, value: T, range: RangeInclusive<T>)
+    where
+        T: PartialOrd + fmt::Display,
+    {
+        let problem = format!(
+            "must be between {} and {}, got {value}",
+            range.start(),
+            range.end()
+        );
+        self.check(range.contains(&value), key, problem);
     }
 
     /// Records a problem unless `value` is one of `allowed`.

@@ -113,16 +113,8 @@ impl ReplayConfig {
             "table",
             format!("must be 1 to 64 characters, got {:?}", self.table),
         );
-        problems.check(
-            (1..=100_000_000).contains(&self.capacity),
-            "capacity",
-            format!("must be between 1 and 100000000, got {}", self.capacity),
-        );
-        problems.check(
-            (0.0..=1.0).contains(&self.alpha),
-            "alpha",
-            format!("must be between 0 and 1, got {}", self.alpha),
-        );
+        problems.within("capacity", self.capacity, 1..=100_000_000);
+        problems.within("alpha", self.alpha, 0.0..=1.0);
         problems.check(
             self.min_priority > 0.0 && self.min_priority.is_finite(),
             "min_priority",
@@ -150,33 +142,19 @@ impl ReplayConfig {
             ("insert_timeout_ms", self.insert_timeout_ms),
             ("sample_timeout_ms", self.sample_timeout_ms),
         ] {
-            problems.check(
-                (1..=3_600_000).contains(&value),
-                key,
-                format!("must be between 1 and 3600000, got {value}"),
-            );
+            problems.within(key, value, 1..=3_600_000);
         }
-        problems.check(
-            (64 << 10..=1 << 30).contains(&self.max_message_bytes),
+        problems.within(
             "max_message_bytes",
-            format!(
-                "must be between 65536 and 1073741824, got {}",
-                self.max_message_bytes
-            ),
+            self.max_message_bytes,
+            64 << 10..=1 << 30,
         );
         problems.check(
             self.max_batch_transitions >= 1,
             "max_batch_transitions",
             "must be at least 1".to_owned(),
         );
-        problems.check(
-            (1..=1 << 20).contains(&self.max_sample_batch),
-            "max_sample_batch",
-            format!(
-                "must be between 1 and 1048576, got {}",
-                self.max_sample_batch
-            ),
-        );
+        problems.within("max_sample_batch", self.max_sample_batch, 1..=1 << 20);
         problems.check(
             self.snapshot_keep >= 1,
             "snapshot_keep",

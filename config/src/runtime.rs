@@ -29,11 +29,7 @@ impl RuntimeConfig {
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("runtime");
-        problems.check(
-            (1..=256).contains(&self.worker_threads),
-            "worker_threads",
-            format!("must be between 1 and 256, got {}", self.worker_threads),
-        );
+        problems.within("worker_threads", self.worker_threads, 1..=256);
         problems.check(
             self.compute_threads <= 1024,
             "compute_threads",

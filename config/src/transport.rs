@@ -78,11 +78,7 @@ impl TransportConfig {
             ("initial_backoff_ms", self.initial_backoff_ms),
             ("shm_send_timeout_ms", self.shm_send_timeout_ms),
         ] {
-            problems.check(
-                (1..=3_600_000).contains(&value),
-                key,
-                format!("must be between 1 and 3600000, got {value}"),
-            );
+            problems.within(key, value, 1..=3_600_000);
         }
         problems.check(
             self.max_backoff_ms >= self.initial_backoff_ms && self.max_backoff_ms <= 3_600_000,
@@ -105,26 +101,12 @@ impl TransportConfig {
                 self.shm_prefix
             ),
         );
-        problems.check(
-            (1..=4096).contains(&self.shm_max_publishers),
-            "shm_max_publishers",
-            format!(
-                "must be between 1 and 4096, got {}",
-                self.shm_max_publishers
-            ),
-        );
-        problems.check(
-            (1..=65_536).contains(&self.shm_buffer),
-            "shm_buffer",
-            format!("must be between 1 and 65536, got {}", self.shm_buffer),
-        );
-        problems.check(
-            (1024..=1 << 30).contains(&self.shm_initial_batch_bytes),
+        problems.within("shm_max_publishers", self.shm_max_publishers, 1..=4096);
+        problems.within("shm_buffer", self.shm_buffer, 1..=65_536);
+        problems.within(
             "shm_initial_batch_bytes",
-            format!(
-                "must be between 1024 and 1073741824, got {}",
-                self.shm_initial_batch_bytes
-            ),
+            self.shm_initial_batch_bytes,
+            1024..=1 << 30,
         );
         problems.into_vec()
     }
