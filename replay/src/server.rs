@@ -14,8 +14,8 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
 use crossroads_proto::v1::replay_server::ReplayServer as PbServer;
 use crossroads_transport::shm::ShmError;
 use prometheus::Registry;
