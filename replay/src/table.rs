@@ -283,6 +283,13 @@ struct Inner {
 }
 /// One prioritized table. Thread-safe (`&self` everywhere); share it in an
 /// `Arc`.
+///
+/// Every method but [`insert`](Self::insert) and [`sample`](Self::sample)
+/// returns without waiting; those two wait for the rate limiter with no
+/// lock held, at most their timeout. Each method's doc states what it
+/// mutates; the accessors ([`name`](Self::name), [`config`](Self::config),
+/// [`metrics`](Self::metrics)) take no lock and mutate nothing. A change
+/// of content wakes every waiting call to look again.
 #[derive(Debug)]
 pub struct Table {
     config: TableConfig,
@@ -329,8 +336,9 @@ impl Table {
     /// - Mutates: on success the items (the oldest are evicted when full),
     ///   their observations, the limiter's insert count, the table's spec
     ///   (set by the first batch; a batch of another spec is
-    ///   [`TableError::Invalid`]) and the size and bytes gauges. An insert
-    ///   that had to wait counts in the limiter's and the metrics' waits.
+    ///   [`TableError::Invalid`]) and the size and bytes gauges; wakes
+    ///   waiting samples. An insert that had to wait counts in the
+    ///   limiter's and the metrics' waits.
     pub async fn insert(
         &self,
         batch: &PreparedBatch,
@@ -375,8 +383,9 @@ impl Table {
     /// - Timeout: `timeout`, then [`TableError::Timeout`]; shutdown ends the
     ///   wait at once with [`TableError::ShuttingDown`].
     /// - Mutates: the sampler's random state and the limiter's sample
-    ///   count (by `batch_size`), and the samples metric; items and
-    ///   priorities are left as they are.
+    ///   count (by `batch_size`), and the samples metric (and waits, as an
+    ///   insert's); items and priorities are left as they are. Wakes
+    ///   waiting inserts.
     pub async fn sample(
         &self,
         batch_size: usize,
