@@ -123,6 +123,16 @@ impl State {
         })
     }
 
+    /// The table named `name`, or the counted rejection as a status.
+    fn table_or_status(&self, name: &str) -> Result<&Arc<Table>, Status> {
+        self.accept(self.table(name))
+    }
+
+    /// `checked`'s value, or its error counted and turned into a status.
+    fn accept<T>(&self, checked: Result<T, BatchError>) -> Result<T, Status> {
+        checked.map_err(|e| self.reject(&e))
+    }
+
     /// Counts a rejection and turns it into a status.
     pub(crate) fn reject(&self, e: &BatchError) -> Status {
         self.metrics.reject(e.reason);
@@ -143,7 +153,7 @@ impl State {
     }
 
     async fn insert(&self, request: pb::InsertRequest) -> Result<pb::InsertAck, Status> {
-        let table = self.table(&request.table).map_err(|e| self.reject(&e))?;
+        let table = self.table_or_status(&request.table)?;
         let batch = request.batch.ok_or_else(|| {
             self.reject(&BatchError::new(
                 RejectReason::BadRequest,
@@ -151,10 +161,11 @@ impl State {
                 "missing",
             ))
         })?;
-        self.limits
-            .check_batch("batch.actions", batch.actions.len())
-            .map_err(|e| self.reject(&e))?;
-        let batch = wire::batch_from_wire(batch).map_err(|e| self.reject(&e.within("batch")))?;
+        self.accept(
+            self.limits
+                .check_batch("batch.actions", batch.actions.len()),
+        )?;
+        let batch = self.accept(wire::batch_from_wire(batch).map_err(|e| e.within("batch")))?;
         let prepared = PreparedBatch::new(batch);
         let done = table
             .insert(&prepared, self.limits.insert_timeout, &self.shutdown)
@@ -236,13 +247,9 @@ impl pb::replay_server::Replay for ReplayService {
         &self,
         request: Request<pb::SampleRequest>,
     ) -> Result<Response<pb::SampleResponse>, Status> {
-        let state = &self.state;
-        let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
-        state
-            .limits
-            .check_sample(r.batch_size as usize)
-            .map_err(|e| state.reject(&e))?;
+        let (state, r) = (&self.state, request.into_inner());
+        let table = state.table_or_status(&r.table)?;
+        state.accept(state.limits.check_sample(r.batch_size as usize))?;
         if !r.beta.is_finite() {
             return Err(state.reject(&BatchError::new(
                 RejectReason::BadRequest,
@@ -270,13 +277,9 @@ impl pb::replay_server::Replay for ReplayService {
         &self,
         request: Request<pb::UpdatePrioritiesRequest>,
     ) -> Result<Response<pb::UpdatePrioritiesResponse>, Status> {
-        let state = &self.state;
-        let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
-        state
-            .limits
-            .check_update(r.keys.len())
-            .map_err(|e| state.reject(&e))?;
+        let (state, r) = (&self.state, request.into_inner());
+        let table = state.table_or_status(&r.table)?;
+        state.accept(state.limits.check_update(r.keys.len()))?;
         let done = table
             .update_priorities(&r.keys, &r.priorities)
             .map_err(|e| state.status(e))?;
@@ -290,10 +293,8 @@ impl pb::replay_server::Replay for ReplayService {
         &self,
         request: Request<pb::InfoRequest>,
     ) -> Result<Response<pb::TableInfo>, Status> {
-        let state = &self.state;
-        let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
-        let s = table.stats();
+        let (state, r) = (&self.state, request.into_inner());
+        let s = state.table_or_status(&r.table)?.stats();
         Ok(Response::new(pb::TableInfo {
             name: s.name,
             size: s.size,

@@ -397,6 +397,12 @@ pub fn node() -> Result<Node<ipc::Service>, ShmError> {
         .map_err(|e| ShmError::iceoryx("creating node", e))
 }
 
+/// `name` as an iceoryx2 service name.
+pub fn iceoryx_name(name: &str) -> Result<ServiceName, ShmError> {
+    name.try_into()
+        .map_err(|e| ShmError::iceoryx("service name", e))
+}
+
 /// Opens (or creates) the insert service of `table`, with the settings both
 /// sides share: no history, no overflow (a full queue pushes back on the
 /// publisher instead of dropping batches), `shm_buffer` batches queued.
@@ -405,11 +411,7 @@ pub fn open_batch_service(
     config: &TransportConfig,
     table: &str,
 ) -> Result<PortFactory<ipc::Service, [u8], BatchFrameHeader>, ShmError> {
-    let name = service_name(&config.shm_prefix, table);
-    let name: ServiceName = name
-        .as_str()
-        .try_into()
-        .map_err(|e| ShmError::iceoryx("service name", e))?;
+    let name = iceoryx_name(&service_name(&config.shm_prefix, table))?;
     node.service_builder(&name)
         .publish_subscribe::<[u8]>()
         .user_header::<BatchFrameHeader>()
@@ -431,11 +433,7 @@ pub fn open_ack_service(
     config: &TransportConfig,
     table: &str,
 ) -> Result<PortFactory<ipc::Service, ShmInsertAck, ()>, ShmError> {
-    let name = ack_service_name(&config.shm_prefix, table);
-    let name: ServiceName = name
-        .as_str()
-        .try_into()
-        .map_err(|e| ShmError::iceoryx("service name", e))?;
+    let name = iceoryx_name(&ack_service_name(&config.shm_prefix, table))?;
     node.service_builder(&name)
         .publish_subscribe::<ShmInsertAck>()
         .enable_safe_overflow(true)
