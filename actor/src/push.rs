@@ -20,7 +20,7 @@ use crossroads_config::ActorTransport;
 use crossroads_config::TransportConfig;
 use crossroads_transport::grpc::{ClientError, InsertStream, ReplayClient};
 use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
-use crossroads_types::TransitionBatch;
+use crossroads_types::{TransitionBatch, ValidBatch};
 
 use crate::buffer::PushBuffer;
 use crate::error::ActorError;
@@ -398,20 +398,30 @@ fn shm_worker(ctx: Ctx) {
         };
         let id = next_id;
         next_id += 1;
+        let transitions = batch.len() as u64;
+        let drop_invalid = |e: &dyn std::fmt::Display| {
+            tracing::warn!(error = %e, "an invalid batch was not sent; dropped");
+            ctx.metrics.dropped("rejected", transitions);
+        };
+        // Checked once, here: shared memory carries only valid batches.
+        let batch = match ValidBatch::new(batch) {
+            Ok(batch) => batch,
+            Err(e) => {
+                drop_invalid(&e);
+                continue;
+            }
+        };
         match p.send(id, &batch) {
             Ok(()) => sent.push_back((
                 id,
                 Sent {
-                    batch,
+                    batch: batch.into_inner(),
                     at: Instant::now(),
                 },
             )),
-            Err(ShmError::Invalid(e)) => {
-                tracing::warn!(error = %e, "an invalid batch was not sent; dropped");
-                ctx.metrics.dropped("rejected", batch.len() as u64);
-            }
+            Err(ShmError::Invalid(e)) => drop_invalid(&e),
             Err(e) => {
-                ctx.buffer.requeue(std::iter::once(batch));
+                ctx.buffer.requeue(std::iter::once(batch.into_inner()));
                 if matches!(e, ShmError::Iceoryx { .. }) {
                     publisher = None;
                 }

@@ -2,8 +2,7 @@
 //! checked against the network at the boundary.
 
 use crossroads_model::NetworkSpec;
-use crossroads_transport::grpc::Sampled;
-use crossroads_types::TransitionBatch;
+use crossroads_types::{Sample, TransitionBatch};
 use tch::Tensor;
 
 use crate::LearnerError;
@@ -42,7 +41,7 @@ impl TrainingBatch {
     /// The tensors of a sampled batch. Fails, naming the problem, when the
     /// batch's observations or actions are not the network's, or weights
     /// are not finite and positive.
-    pub fn from_sampled(sampled: &Sampled, spec: &NetworkSpec) -> Result<Self, LearnerError> {
+    pub fn from_sampled(sampled: &Sample, spec: &NetworkSpec) -> Result<Self, LearnerError> {
         if let Some((i, w)) = sampled
             .weights
             .iter()
@@ -105,8 +104,8 @@ impl TrainingBatch {
         let mut next = vec![0f32; n * input];
         for i in 0..n {
             let (s, s2) = (
-                batch.observation_index[i] as usize,
-                batch.next_observation_index[i] as usize,
+                batch.columns.observation_index[i] as usize,
+                batch.columns.next_observation_index[i] as usize,
             );
             batch
                 .observations
@@ -118,13 +117,18 @@ impl TrainingBatch {
                 })
                 .map_err(|e| LearnerError::Batch(format!("observation of transition {i}: {e}")))?;
         }
-        let actions: Vec<i64> = batch.actions.iter().map(|&a| i64::from(a)).collect();
+        let actions: Vec<i64> = batch
+            .columns
+            .actions
+            .iter()
+            .map(|&a| i64::from(a))
+            .collect();
         let shape = [n as i64, input as i64];
         Ok(Self {
             obs: Tensor::from_slice(&obs).reshape(shape),
             actions: Tensor::from_slice(&actions),
-            rewards: Tensor::from_slice(&batch.rewards),
-            discounts: Tensor::from_slice(&batch.discounts),
+            rewards: Tensor::from_slice(&batch.columns.rewards),
+            discounts: Tensor::from_slice(&batch.columns.discounts),
             next_obs: Tensor::from_slice(&next).reshape(shape),
             weights: Tensor::from_slice(weights),
             keys,

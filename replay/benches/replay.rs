@@ -48,14 +48,14 @@ fn benches(c: &mut Criterion) {
         b.iter_batched(
             || episodes.batch(64),
             |batch| {
-                let p = PreparedBatch::new(batch).expect("valid batch");
+                let p = PreparedBatch::try_from(batch).expect("valid batch");
                 black_box(table.insert_now(&p).expect("fits"))
             },
             criterion::BatchSize::SmallInput,
         )
     });
     let prepared: Vec<_> = (0..64)
-        .map(|_| PreparedBatch::new(episodes.batch(64)).expect("valid"))
+        .map(|_| PreparedBatch::try_from(episodes.batch(64)).expect("valid"))
         .collect();
     let mut i = 0;
     group.bench_function("insert_batch64_prepared", |b| {

@@ -141,7 +141,7 @@ pub fn bench_table(capacity: usize) -> Table {
 pub fn fill(table: &Table, episodes: &mut SyntheticEpisodes, batch: usize) {
     let capacity = table.config().capacity as u64;
     while table.stats().size < capacity {
-        if let Ok(p) = PreparedBatch::new(episodes.batch(batch)) {
+        if let Ok(p) = PreparedBatch::try_from(episodes.batch(batch)) {
             let _ = table.insert_now(&p);
         }
     }
@@ -154,7 +154,8 @@ pub struct Report {
     pub capacity: usize,
     /// Memory held by the full table divided by its size.
     pub bytes_per_transition: f64,
-    /// Median over rounds, batches of 64 including encoding.
+    /// Median over rounds, batches of 64 including validation and
+    /// encoding.
     pub inserts_per_sec: f64,
     /// Median over rounds, batches of 256 including decoding.
     pub samples_per_sec: f64,
@@ -184,7 +185,7 @@ pub fn run(capacity: usize, rounds: usize) -> Report {
         let batches: Vec<_> = (0..50).map(|_| episodes.batch(64)).collect();
         let start = Instant::now();
         for b in batches {
-            if let Ok(p) = PreparedBatch::new(b) {
+            if let Ok(p) = PreparedBatch::try_from(b) {
                 let _ = table.insert_now(&p);
             }
         }

@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use crossroads_config::TransportConfig;
 use crossroads_transport::shm::{self, ShmError};
-use crossroads_types::batch::{BatchError, RejectReason};
+use crossroads_types::batch::{BatchError, RejectReason, ValidBatch};
 
 use crate::metrics::Transport;
 use crate::service::State;
@@ -34,16 +34,15 @@ const IDLE: Duration = Duration::from_millis(1);
 /// The running ingest thread. [`ShmIngest::join`] waits for it after
 /// shutdown fired.
 #[derive(Debug)]
-pub struct ShmIngest {
+pub(crate) struct ShmIngest {
     thread: JoinHandle<()>,
-    services: Vec<String>,
 }
 
 impl ShmIngest {
     /// Starts the thread and returns once every subscriber is ready (or
     /// with the error that prevented it). Must be called inside a tokio
     /// runtime, whose handle the thread uses to wait for the rate limiter.
-    pub fn start(config: &TransportConfig, state: Arc<State>) -> Result<Self, ShmError> {
+    pub(crate) fn start(config: &TransportConfig, state: Arc<State>) -> Result<Self, ShmError> {
         let (ready_tx, ready_rx) = std::sync::mpsc::channel();
         let config = config.clone();
         let runtime = tokio::runtime::Handle::current();
@@ -121,7 +120,7 @@ impl ShmIngest {
         match ready_rx.recv() {
             Ok(Ok(())) => {
                 tracing::info!(services = ?services, "taking batches over shared memory");
-                Ok(Self { thread, services })
+                Ok(Self { thread })
             }
             Ok(Err(e)) => {
                 let _ = thread.join();
@@ -134,14 +133,9 @@ impl ShmIngest {
         }
     }
 
-    /// The iceoryx2 services subscribed to.
-    pub fn services(&self) -> &[String] {
-        &self.services
-    }
-
     /// Waits for the thread to drain its queues and end (after shutdown
     /// fired). Blocking.
-    pub fn join(self) {
+    pub(crate) fn join(self) {
         if self.thread.join().is_err() {
             tracing::error!("the shared-memory ingest thread panicked");
         }
@@ -158,7 +152,7 @@ const TAKE_MAX: usize = 1024;
 struct Received {
     origin: u128,
     batch_id: u64,
-    read: Result<(String, u64, crossroads_types::TransitionBatch), BatchError>,
+    read: Result<(String, u64, ValidBatch), BatchError>,
 }
 
 /// Received batches by publisher, served one publisher after another.
@@ -232,14 +226,15 @@ struct Port {
         iceoryx2::service::port_factory::publish_subscribe::PortFactory<Ipc, shm::ShmInsertAck, ()>,
 }
 
-/// Validates, prepares and inserts one received batch; counts and logs
+/// Checks the table and size of one received (validated) batch, prepares
+/// and inserts it; counts and logs
 /// rejections. Returns what to acknowledge: `(inserted, table size)` or
 /// the rejection's reason.
 fn handle(
     state: &State,
     runtime: &tokio::runtime::Handle,
     table: &Arc<Table>,
-    read: Result<(String, u64, crossroads_types::TransitionBatch), BatchError>,
+    read: Result<(String, u64, ValidBatch), BatchError>,
     draining: bool,
 ) -> Result<(u32, u64), RejectReason> {
     let reject = |e: BatchError| {
@@ -258,21 +253,10 @@ fn handle(
             format!("{name:?} sent on the service of table {:?}", table.name()),
         ));
     }
-    if batch.len() > state.limits.max_batch_transitions {
-        return reject(BatchError::new(
-            RejectReason::Oversized,
-            "actions",
-            format!(
-                "{} transitions, above {}",
-                batch.len(),
-                state.limits.max_batch_transitions
-            ),
-        ));
+    if let Err(e) = state.limits.check_batch("actions", batch.len()) {
+        return reject(e);
     }
-    let prepared = match PreparedBatch::new(batch) {
-        Ok(p) => p,
-        Err(e) => return reject(e),
-    };
+    let prepared = PreparedBatch::new(batch);
     let mut now = draining;
     loop {
         let outcome = if now {

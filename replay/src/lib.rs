@@ -7,19 +7,27 @@
 //! [`RateLimiter`](rate_limiter::RateLimiter) decides when inserts and
 //! samples may proceed. [`snapshot`] writes and restores tables atomically
 //! with a checksum. The server ([`server::start`], [`server::run`]) serves
-//! the tables over gRPC ([`service::ReplayService`]) and takes batches from
-//! actors on the same host over iceoryx2 ([`ingest::ShmIngest`]), with the
-//! `crossroads_replay_*` metrics of [`metrics`]. [`bench`](mod@bench) measures inserts,
-//! samples and bytes per stored transition.
+//! the tables over gRPC (the `service` module, the tonic service) and takes
+//! batches from actors on the same host over iceoryx2 (the `ingest`
+//! module), with the `crossroads_replay_*` metrics of [`metrics`].
+//! [`bench`](mod@bench) measures inserts, samples and bytes per stored
+//! transition.
+//!
+//! Batches enter the server validated once, where they arrive
+//! (`crossroads_transport::wire` for gRPC, `crossroads_transport::shm` for
+//! shared memory), as [`ValidBatch`](crossroads_types::ValidBatch)es; a
+//! [`PreparedBatch`] is made from one without another check. Invariant:
+//! no public signature here has a prost type; the tonic service and the
+//! ingest thread are crate-private.
 
 pub mod bench;
 pub mod compact;
-pub mod ingest;
+mod ingest;
 pub mod metrics;
 pub mod rate_limiter;
 pub mod roster;
 pub mod server;
-pub mod service;
+mod service;
 pub mod snapshot;
 pub mod storage;
 pub mod sum_tree;
@@ -27,4 +35,4 @@ pub mod table;
 
 pub use metrics::{ReplayMetrics, TableMetrics};
 pub use server::{RunningServer, ServerError, run, start};
-pub use table::{PreparedBatch, Sample, Table, TableConfig, TableError, TableImage, TableStats};
+pub use table::{PreparedBatch, Table, TableConfig, TableError, TableImage, TableStats};

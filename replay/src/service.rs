@@ -1,4 +1,5 @@
-//! The gRPC `crossroads.v1.Replay` service over the server's tables.
+//! The gRPC `crossroads.v1.Replay` service over the server's tables;
+//! crate-private, so no prost type is in the crate's public API.
 //!
 //! Each call converts its request into domain types at the boundary
 //! ([`crossroads_transport::wire`]), rejecting anything invalid with
@@ -34,40 +35,82 @@ const MAX_SAMPLE_WAIT: Duration = Duration::from_secs(600);
 
 /// Per-call limits, from `[replay]`.
 #[derive(Debug, Clone, Copy)]
-pub struct Limits {
+pub(crate) struct Limits {
     /// Longest an insert waits for the rate limiter.
-    pub insert_timeout: Duration,
+    pub(crate) insert_timeout: Duration,
     /// Default longest wait of a sample.
-    pub sample_timeout: Duration,
+    pub(crate) sample_timeout: Duration,
     /// Largest batch, transitions.
-    pub max_batch_transitions: usize,
+    pub(crate) max_batch_transitions: usize,
     /// Largest sample or priority update, items.
-    pub max_sample_batch: usize,
+    pub(crate) max_sample_batch: usize,
+}
+
+impl Limits {
+    /// A batch of `n` transitions, refused (`Oversized`, naming `field`)
+    /// above `max_batch_transitions`.
+    pub(crate) fn check_batch(&self, field: &str, n: usize) -> Result<(), BatchError> {
+        let max = self.max_batch_transitions;
+        at_most(field, n, max, || {
+            format!("{n} transitions, above the server's {max} per batch")
+        })
+    }
+
+    /// A sample of `n` items, refused above `max_sample_batch`.
+    fn check_sample(&self, n: usize) -> Result<(), BatchError> {
+        let max = self.max_sample_batch;
+        at_most("batch_size", n, max, || {
+            format!("{n} is above the server's {max}")
+        })
+    }
+
+    /// A priority update of `n` keys, refused above `max_sample_batch`.
+    fn check_update(&self, n: usize) -> Result<(), BatchError> {
+        let max = self.max_sample_batch;
+        at_most("keys", n, max, || {
+            format!("{n} keys, above the server's {max}")
+        })
+    }
+}
+
+/// `Ok` when `n` is at most `max`; otherwise an `Oversized` rejection of
+/// `field` saying `problem()`.
+fn at_most(
+    field: &str,
+    n: usize,
+    max: usize,
+    problem: impl FnOnce() -> String,
+) -> Result<(), BatchError> {
+    if n <= max {
+        Ok(())
+    } else {
+        Err(BatchError::new(RejectReason::Oversized, field, problem()))
+    }
 }
 
 /// What the service and the shared-memory ingest share.
 #[derive(Debug)]
-pub struct State {
+pub(crate) struct State {
     /// Tables by name.
-    pub tables: BTreeMap<String, Arc<Table>>,
+    pub(crate) tables: BTreeMap<String, Arc<Table>>,
     /// The process's replay metrics.
-    pub metrics: ReplayMetrics,
+    pub(crate) metrics: ReplayMetrics,
     /// Snapshot writer, when a directory is configured.
-    pub snapshots: Option<Arc<Snapshots>>,
+    pub(crate) snapshots: Option<Arc<Snapshots>>,
     /// Per-call limits.
-    pub limits: Limits,
+    pub(crate) limits: Limits,
     /// Fires when the server stops.
-    pub shutdown: Shutdown,
+    pub(crate) shutdown: Shutdown,
     /// Tasks serving insert streams; the server waits for them before its
     /// last snapshot, so nothing acknowledged is left out of it.
-    pub tasks: TaskTracker,
+    pub(crate) tasks: TaskTracker,
     /// Actors that asked for an index.
-    pub roster: Roster,
+    pub(crate) roster: Roster,
 }
 
 impl State {
     /// The table named `name`, or a counted rejection.
-    pub fn table(&self, name: &str) -> Result<&Arc<Table>, BatchError> {
+    pub(crate) fn table(&self, name: &str) -> Result<&Arc<Table>, BatchError> {
         self.tables.get(name).ok_or_else(|| {
             BatchError::new(
                 RejectReason::UnknownTable,
@@ -80,8 +123,18 @@ impl State {
         })
     }
 
+    /// The table named `name`, or the counted rejection as a status.
+    fn table_or_status(&self, name: &str) -> Result<&Arc<Table>, Status> {
+        self.accept(self.table(name))
+    }
+
+    /// `checked`'s value, or its error counted and turned into a status.
+    fn accept<T>(&self, checked: Result<T, BatchError>) -> Result<T, Status> {
+        checked.map_err(|e| self.reject(&e))
+    }
+
     /// Counts a rejection and turns it into a status.
-    pub fn reject(&self, e: &BatchError) -> Status {
+    pub(crate) fn reject(&self, e: &BatchError) -> Status {
         self.metrics.reject(e.reason);
         tracing::debug!(reason = %e.reason, error = %e, "rejected input");
         match e.reason {
@@ -100,7 +153,7 @@ impl State {
     }
 
     async fn insert(&self, request: pb::InsertRequest) -> Result<pb::InsertAck, Status> {
-        let table = self.table(&request.table).map_err(|e| self.reject(&e))?;
+        let table = self.table_or_status(&request.table)?;
         let batch = request.batch.ok_or_else(|| {
             self.reject(&BatchError::new(
                 RejectReason::BadRequest,
@@ -108,19 +161,12 @@ impl State {
                 "missing",
             ))
         })?;
-        if batch.actions.len() > self.limits.max_batch_transitions {
-            return Err(self.reject(&BatchError::new(
-                RejectReason::Oversized,
-                "batch.actions",
-                format!(
-                    "{} transitions, above the server's {} per batch",
-                    batch.actions.len(),
-                    self.limits.max_batch_transitions
-                ),
-            )));
-        }
-        let batch = wire::batch_from_wire(batch).map_err(|e| self.reject(&e.within("batch")))?;
-        let prepared = PreparedBatch::new(batch).map_err(|e| self.reject(&e.within("batch")))?;
+        self.accept(
+            self.limits
+                .check_batch("batch.actions", batch.actions.len()),
+        )?;
+        let batch = self.accept(wire::batch_from_wire(batch).map_err(|e| e.within("batch")))?;
+        let prepared = PreparedBatch::new(batch);
         let done = table
             .insert(&prepared, self.limits.insert_timeout, &self.shutdown)
             .await
@@ -138,13 +184,13 @@ impl State {
 
 /// The tonic service. Cheap to clone.
 #[derive(Debug, Clone)]
-pub struct ReplayService {
+pub(crate) struct ReplayService {
     state: Arc<State>,
 }
 
 impl ReplayService {
     /// A service over `state`.
-    pub fn new(state: Arc<State>) -> Self {
+    pub(crate) fn new(state: Arc<State>) -> Self {
         Self { state }
     }
 }
@@ -201,19 +247,9 @@ impl pb::replay_server::Replay for ReplayService {
         &self,
         request: Request<pb::SampleRequest>,
     ) -> Result<Response<pb::SampleResponse>, Status> {
-        let state = &self.state;
-        let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
-        if r.batch_size as usize > state.limits.max_sample_batch {
-            return Err(state.reject(&BatchError::new(
-                RejectReason::Oversized,
-                "batch_size",
-                format!(
-                    "{} is above the server's {}",
-                    r.batch_size, state.limits.max_sample_batch
-                ),
-            )));
-        }
+        let (state, r) = (&self.state, request.into_inner());
+        let table = state.table_or_status(&r.table)?;
+        state.accept(state.limits.check_sample(r.batch_size as usize))?;
         if !r.beta.is_finite() {
             return Err(state.reject(&BatchError::new(
                 RejectReason::BadRequest,
@@ -234,32 +270,16 @@ impl pb::replay_server::Replay for ReplayService {
             )
             .await
             .map_err(|e| state.status(e))?;
-        Ok(Response::new(pb::SampleResponse {
-            keys: sample.keys,
-            weights: sample.weights,
-            priorities: sample.priorities,
-            batch: Some(wire::batch_to_wire(sample.batch)),
-        }))
+        Ok(Response::new(wire::sample_to_wire(sample)))
     }
 
     async fn update_priorities(
         &self,
         request: Request<pb::UpdatePrioritiesRequest>,
     ) -> Result<Response<pb::UpdatePrioritiesResponse>, Status> {
-        let state = &self.state;
-        let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
-        if r.keys.len() > state.limits.max_sample_batch {
-            return Err(state.reject(&BatchError::new(
-                RejectReason::Oversized,
-                "keys",
-                format!(
-                    "{} keys, above the server's {}",
-                    r.keys.len(),
-                    state.limits.max_sample_batch
-                ),
-            )));
-        }
+        let (state, r) = (&self.state, request.into_inner());
+        let table = state.table_or_status(&r.table)?;
+        state.accept(state.limits.check_update(r.keys.len()))?;
         let done = table
             .update_priorities(&r.keys, &r.priorities)
             .map_err(|e| state.status(e))?;
@@ -273,10 +293,8 @@ impl pb::replay_server::Replay for ReplayService {
         &self,
         request: Request<pb::InfoRequest>,
     ) -> Result<Response<pb::TableInfo>, Status> {
-        let state = &self.state;
-        let r = request.into_inner();
-        let table = state.table(&r.table).map_err(|e| state.reject(&e))?;
-        let s = table.stats();
+        let (state, r) = (&self.state, request.into_inner());
+        let s = state.table_or_status(&r.table)?.stats();
         Ok(Response::new(pb::TableInfo {
             name: s.name,
             size: s.size,

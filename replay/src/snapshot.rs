@@ -22,6 +22,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crossroads_types::ObservationSpec;
+use crossroads_types::columns::{Columns, ROW_BYTES};
 
 use crate::metrics::ReplayMetrics;
 use crate::table::{Table, TableImage};
@@ -104,26 +105,23 @@ pub fn encode(tables: &[(String, TableImage)]) -> Vec<u8> {
             }
             None => body.push(0),
         }
+        // Format 1 stores the insert and sample counts twice (once more as
+        // the rate limiter's, which are the same counts).
         for v in [
             t.next_key,
             t.inserts_total,
             t.samples_total,
             t.priority_updates_total,
             t.ignored_updates_total,
-            t.limiter_counts.0,
-            t.limiter_counts.1,
+            t.inserts_total,
+            t.samples_total,
             t.len() as u64,
         ] {
             put_u64(&mut body, v);
         }
-        t.actions.iter().for_each(|v| put_u32(&mut body, *v));
-        for column in [&t.rewards, &t.discounts, &t.priorities] {
-            column.iter().for_each(|v| put_u32(&mut body, v.to_bits()));
-        }
-        t.observation.iter().for_each(|v| put_u32(&mut body, *v));
-        t.next_observation
-            .iter()
-            .for_each(|v| put_u32(&mut body, *v));
+        let start = body.len();
+        body.resize(start + t.items.byte_len(), 0);
+        t.items.write_le(&mut body[start..]);
         put_u64(&mut body, t.observation_offsets.len() as u64);
         t.observation_offsets
             .iter()
@@ -203,16 +201,12 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<(String, TableImage)>, String> {
             samples_total: r.u64()?,
             priority_updates_total: r.u64()?,
             ignored_updates_total: r.u64()?,
-            limiter_counts: (r.u64()?, r.u64()?),
             ..TableImage::default()
         };
-        let n = r.len(4 * 6)?;
-        image.actions = r.u32s(n)?;
-        image.rewards = r.f32s(n)?;
-        image.discounts = r.f32s(n)?;
-        image.priorities = r.f32s(n)?;
-        image.observation = r.u32s(n)?;
-        image.next_observation = r.u32s(n)?;
+        // The same counts again, as the rate limiter's (see `encode`).
+        let _limiter_counts = (r.u64()?, r.u64()?);
+        let n = r.len(ROW_BYTES)?;
+        image.items = Columns::read_le(r.bytes(n * ROW_BYTES)?).ok_or("rows of 24 bytes")?;
         let n_obs = r.len(8)?;
         image.observation_offsets = (0..n_obs).map(|_| r.u64()).collect::<Result<_, _>>()?;
         let data_len = r.len(1)?;
@@ -502,10 +496,6 @@ impl<'a> Reader<'a> {
         Ok(b.chunks_exact(4)
             .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
             .collect())
-    }
-
-    fn f32s(&mut self, n: usize) -> Result<Vec<f32>, String> {
-        Ok(self.u32s(n)?.into_iter().map(f32::from_bits).collect())
     }
 
     fn str(&mut self) -> Result<String, String> {

@@ -15,16 +15,22 @@
 //! decoded after, and waits for the rate limiter happen with no lock held,
 //! so a caller that goes away mid-wait (its future dropped) leaves nothing
 //! behind.
+//!
+//! Each public method of [`Table`] states its contract, after Reverb's
+//! `table.h`: whether it blocks (waits for the rate limiter; "no" means it
+//! only takes the lock, held for work proportional to its input), its
+//! timeout, and what it mutates.
 
+use std::convert::Infallible;
 use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
 use crossroads_config::{ReplayConfig, WeightNormalization};
-use crossroads_types::ObservationEncoding;
 use crossroads_types::batch::{
-    BatchError, MAX_OBSERVATION_LEN, ObservationPool, ObservationSpec, RejectReason,
-    TransitionBatch, check_priority,
+    BatchError, MAX_OBSERVATION_LEN, ObservationPool, ObservationSpec, RejectReason, Transition,
+    TransitionBatch, ValidBatch, check_priorities,
 };
+use crossroads_types::{Columns, ObservationEncoding, PrioritiesUpdated, Sample};
 use parking_lot::Mutex;
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -105,22 +111,18 @@ pub enum TableError {
 pub struct PreparedBatch {
     spec: ObservationSpec,
     num_actions: u32,
-    actions: Vec<u32>,
-    rewards: Vec<f32>,
-    discounts: Vec<f32>,
-    priorities: Vec<f32>,
-    observation_index: Vec<u32>,
-    next_observation_index: Vec<u32>,
+    /// The index columns refer to `entries`.
+    columns: Columns,
     /// Per pool entry: content hash and range in `bytes`.
     entries: Vec<(u64, usize, usize)>,
     bytes: Vec<u8>,
 }
 
 impl PreparedBatch {
-    /// Encodes a batch; validates it first (callers at a boundary already
-    /// did, which makes this a cheap second pass).
-    pub fn new(batch: TransitionBatch) -> Result<Self, BatchError> {
-        batch.validate()?;
+    /// Encodes a batch (validated where it entered the process, so not
+    /// checked again).
+    pub fn new(batch: ValidBatch) -> Self {
+        let batch = batch.into_inner();
         let len = batch.spec.num_values().unwrap_or(0);
         let channels = compact::channels_of(&batch.spec.shape);
         let pool = &batch.observations;
@@ -140,28 +142,33 @@ impl PreparedBatch {
             );
             entries.push((content_hash(&bytes[start..]), start, bytes.len()));
         }
-        Ok(Self {
+        Self {
             spec: batch.spec,
             num_actions: batch.num_actions,
-            actions: batch.actions,
-            rewards: batch.rewards,
-            discounts: batch.discounts,
-            priorities: batch.priorities,
-            observation_index: batch.observation_index,
-            next_observation_index: batch.next_observation_index,
+            columns: batch.columns,
             entries,
             bytes,
-        })
+        }
     }
 
     /// Transitions in the batch.
     pub fn len(&self) -> usize {
-        self.actions.len()
+        self.columns.len()
     }
 
     /// Whether it has none.
     pub fn is_empty(&self) -> bool {
-        self.actions.is_empty()
+        self.columns.is_empty()
+    }
+}
+
+impl TryFrom<TransitionBatch> for PreparedBatch {
+    type Error = BatchError;
+
+    /// Validates and encodes a batch made in this process (benchmarks,
+    /// tests, an in-process actor).
+    fn try_from(batch: TransitionBatch) -> Result<Self, BatchError> {
+        ValidBatch::new(batch).map(Self::new)
     }
 }
 
@@ -174,28 +181,6 @@ pub struct Inserted {
     pub size: u64,
     /// Key of the first item stored.
     pub first_key: u64,
-}
-
-/// A sampled batch with its keys and importance weights.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Sample {
-    /// Item keys, batch order.
-    pub keys: Vec<u64>,
-    /// Importance weights, at most 1.
-    pub weights: Vec<f32>,
-    /// Priorities as stored.
-    pub priorities: Vec<f32>,
-    /// The items, observations sparse and each once.
-    pub batch: TransitionBatch,
-}
-
-/// What a priority update did.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Updated {
-    /// Keys updated.
-    pub updated: u32,
-    /// Keys no longer in the table.
-    pub ignored: u32,
 }
 
 /// A table's size, counters and limiter state.
@@ -241,28 +226,17 @@ pub struct TableImage {
     /// Key the next insert gets; the items hold keys
     /// `next_key - len .. next_key`.
     pub next_key: u64,
-    /// Items ever inserted.
+    /// Items ever inserted (the rate limiter's count).
     pub inserts_total: u64,
-    /// Items ever sampled.
+    /// Items ever sampled (the rate limiter's count).
     pub samples_total: u64,
     /// Priority updates.
     pub priority_updates_total: u64,
     /// Ignored priority updates.
     pub ignored_updates_total: u64,
-    /// Rate limiter's insert and sample counts.
-    pub limiter_counts: (u64, u64),
-    /// Columns, oldest first.
-    pub actions: Vec<u32>,
-    /// Rewards.
-    pub rewards: Vec<f32>,
-    /// Discounts.
-    pub discounts: Vec<f32>,
-    /// Raw priorities.
-    pub priorities: Vec<f32>,
-    /// Index into the observation list of each state.
-    pub observation: Vec<u32>,
-    /// Index into the observation list of each next state.
-    pub next_observation: Vec<u32>,
+    /// The items, oldest first, with their raw priorities; the index
+    /// columns refer to the observations below.
+    pub items: Columns,
     /// Start of each compact observation in `observation_data`.
     pub observation_offsets: Vec<u64>,
     /// Compact observations back to back.
@@ -272,12 +246,12 @@ pub struct TableImage {
 impl TableImage {
     /// Items in the image.
     pub fn len(&self) -> usize {
-        self.actions.len()
+        self.items.len()
     }
 
     /// Whether it holds no item.
     pub fn is_empty(&self) -> bool {
-        self.actions.is_empty()
+        self.items.is_empty()
     }
 
     fn observation(&self, i: usize) -> Option<&[u8]> {
@@ -295,26 +269,27 @@ struct Inner {
     spec: Option<(ObservationSpec, u32)>,
     tree: SumTree,
     store: ObservationStore,
-    actions: Vec<u32>,
-    rewards: Vec<f32>,
-    discounts: Vec<f32>,
-    priorities: Vec<f32>,
-    observation: Vec<u32>,
-    next_observation: Vec<u32>,
+    /// The ring of items; the index columns hold store ids.
+    items: Columns,
     /// Key held by slot 0 of the ring's first lap.
     base_key: u64,
     next_key: u64,
     size: usize,
     rng: Xoshiro256PlusPlus,
+    /// Also the count of items ever inserted and sampled.
     limiter: RateLimiter,
-    inserts_total: u64,
-    samples_total: u64,
     priority_updates_total: u64,
     ignored_updates_total: u64,
 }
-
 /// One prioritized table. Thread-safe (`&self` everywhere); share it in an
 /// `Arc`.
+///
+/// Every method but [`insert`](Self::insert) and [`sample`](Self::sample)
+/// returns without waiting; those two wait for the rate limiter with no
+/// lock held, at most their timeout. Each method's doc states what it
+/// mutates; the accessors ([`name`](Self::name), [`config`](Self::config),
+/// [`metrics`](Self::metrics)) take no lock and mutate nothing. A change
+/// of content wakes every waiting call to look again.
 #[derive(Debug)]
 pub struct Table {
     config: TableConfig,
@@ -324,7 +299,7 @@ pub struct Table {
 }
 
 impl Table {
-    /// An empty table.
+    /// An empty table. Sets the capacity gauge of `metrics`.
     pub fn new(config: TableConfig, metrics: TableMetrics) -> Self {
         let inner = Inner::new(&config, 0);
         metrics.capacity.set(config.capacity as i64);
@@ -351,8 +326,19 @@ impl Table {
         &self.metrics
     }
 
-    /// Inserts a batch, waiting at most `timeout` for the rate limiter.
-    /// All of the batch is stored or none of it.
+    /// Inserts a batch; all of it is stored or none of it.
+    ///
+    /// - Blocks: yes, while the rate limiter refuses inserts, without
+    ///   holding the lock; dropping the future gives up with nothing
+    ///   changed.
+    /// - Timeout: `timeout`, then [`TableError::Timeout`]; shutdown ends the
+    ///   wait at once with [`TableError::ShuttingDown`].
+    /// - Mutates: on success the items (the oldest are evicted when full),
+    ///   their observations, the limiter's insert count, the table's spec
+    ///   (set by the first batch; a batch of another spec is
+    ///   [`TableError::Invalid`]) and the size and bytes gauges; wakes
+    ///   waiting samples. An insert that had to wait counts in the
+    ///   limiter's and the metrics' waits.
     pub async fn insert(
         &self,
         batch: &PreparedBatch,
@@ -371,6 +357,10 @@ impl Table {
 
     /// Inserts a batch at once, whatever the rate limiter says (for the
     /// last batches drained at shutdown).
+    ///
+    /// - Blocks: no.
+    /// - Timeout: none.
+    /// - Mutates: as [`insert`](Self::insert), without waiting.
     pub fn insert_now(&self, batch: &PreparedBatch) -> Result<Inserted, TableError> {
         let result = {
             let mut inner = self.inner.lock();
@@ -382,14 +372,27 @@ impl Table {
     }
 
     /// Samples `batch_size` items (with replacement) with importance
-    /// exponent `beta`, waiting at most `timeout` for the rate limiter.
+    /// exponent `beta`; the batch holds each distinct observation once,
+    /// sparse. Items are stored validated, so the batch is not checked
+    /// again (see [`Sample`]'s parameter).
+    ///
+    /// - Blocks: yes, while the table is empty or the rate limiter refuses
+    ///   samples, without holding the lock; dropping the future gives up
+    ///   with nothing changed. A `batch_size` of 0 or a `beta` outside
+    ///   [0, 1] fails at once ([`TableError::Invalid`]).
+    /// - Timeout: `timeout`, then [`TableError::Timeout`]; shutdown ends the
+    ///   wait at once with [`TableError::ShuttingDown`].
+    /// - Mutates: the sampler's random state and the limiter's sample
+    ///   count (by `batch_size`), and the samples metric (and waits, as an
+    ///   insert's); items and priorities are left as they are. Wakes
+    ///   waiting inserts.
     pub async fn sample(
         &self,
         batch_size: usize,
         beta: f64,
         timeout: Duration,
         shutdown: &Shutdown,
-    ) -> Result<Sample, TableError> {
+    ) -> Result<Sample<TransitionBatch>, TableError> {
         if batch_size == 0 {
             return Err(BatchError::new(
                 RejectReason::BadRequest,
@@ -418,14 +421,20 @@ impl Table {
         raw.finish()
     }
 
-    /// Sets new priorities. Every priority is checked first: one invalid
-    /// value rejects the whole request and changes nothing. Keys no longer
-    /// held are ignored and counted.
+    /// Sets new priorities of the items `keys` names, `priorities[i]` for
+    /// `keys[i]`. Every priority is checked first: one that is negative or
+    /// not finite, or lengths that differ, reject the whole request with
+    /// nothing changed. Keys no longer held are ignored and counted.
+    ///
+    /// - Blocks: no.
+    /// - Timeout: none.
+    /// - Mutates: the priorities (and sampling probabilities) of the items
+    ///   held, and the updated and ignored counts and metrics.
     pub fn update_priorities(
         &self,
         keys: &[u64],
         priorities: &[f32],
-    ) -> Result<Updated, TableError> {
+    ) -> Result<PrioritiesUpdated, TableError> {
         if keys.len() != priorities.len() {
             return Err(BatchError::new(
                 RejectReason::LengthMismatch,
@@ -434,11 +443,7 @@ impl Table {
             )
             .into());
         }
-        for (i, p) in priorities.iter().enumerate() {
-            check_priority(*p).map_err(|(reason, problem)| {
-                BatchError::new(reason, format!("priorities[{i}]"), problem)
-            })?;
-        }
+        check_priorities(priorities, |i| format!("priorities[{i}]"))?;
         let updated = {
             let mut inner = self.inner.lock();
             inner.update(&self.config, keys, priorities)
@@ -453,15 +458,20 @@ impl Table {
     }
 
     /// Size, counters and limiter state.
+    ///
+    /// - Blocks: no.
+    /// - Timeout: none.
+    /// - Mutates: nothing.
     pub fn stats(&self) -> TableStats {
         let inner = self.inner.lock();
+        let (inserts_total, samples_total) = inner.limiter.counts();
         let (insert_waits, sample_waits) = inner.limiter.waits();
         TableStats {
             name: self.config.name.clone(),
             size: inner.size as u64,
             capacity: self.config.capacity as u64,
-            inserts_total: inner.inserts_total,
-            samples_total: inner.samples_total,
+            inserts_total,
+            samples_total,
             priority_updates_total: inner.priority_updates_total,
             ignored_updates_total: inner.ignored_updates_total,
             limiter: self.config.limiter,
@@ -476,23 +486,30 @@ impl Table {
     }
 
     /// A copy of the whole content, oldest item first.
+    ///
+    /// - Blocks: no, but holds the lock while it copies every item and
+    ///   observation (inserts and samples wait meanwhile).
+    /// - Timeout: none.
+    /// - Mutates: nothing.
     pub fn image(&self) -> TableImage {
         self.inner.lock().image()
     }
 
     /// Replaces the content by `image` (restoring a snapshot). When the
     /// image holds more items than the capacity, the oldest are dropped;
-    /// returns how many.
+    /// returns how many. An image that does not hold together (columns of
+    /// different lengths, observations out of range, bad priorities) is
+    /// refused with nothing changed.
+    ///
+    /// - Blocks: no; the new content is built without the lock and swapped
+    ///   in.
+    /// - Timeout: none.
+    /// - Mutates: everything: items, observations, keys, counters, the
+    ///   limiter's counts (its waits start again from zero), the sampler's
+    ///   seed and the gauges; wakes every waiting insert and sample.
     pub fn restore(&self, image: &TableImage) -> Result<usize, BatchError> {
         let n = image.len();
-        let columns = [
-            image.rewards.len(),
-            image.discounts.len(),
-            image.priorities.len(),
-            image.observation.len(),
-            image.next_observation.len(),
-        ];
-        if columns.iter().any(|c| *c != n) || image.next_key < n as u64 {
+        if image.items.check_lengths().is_err() || image.next_key < n as u64 {
             return Err(BatchError::new(
                 RejectReason::LengthMismatch,
                 "items",
@@ -501,9 +518,10 @@ impl Table {
         }
         let n_obs = image.observation_offsets.len();
         for (i, (o, no)) in image
-            .observation
+            .items
+            .observation_index
             .iter()
-            .zip(&image.next_observation)
+            .zip(&image.items.next_observation_index)
             .enumerate()
         {
             if *o as usize >= n_obs || *no as usize >= n_obs {
@@ -514,58 +532,37 @@ impl Table {
                 ));
             }
         }
-        for (i, p) in image.priorities.iter().enumerate() {
-            check_priority(*p).map_err(|(reason, problem)| {
-                BatchError::new(reason, format!("items[{i}].priority"), problem)
-            })?;
-        }
+        check_priorities(&image.items.priorities, |i| format!("items[{i}].priority"))?;
         let keep = n.min(self.config.capacity);
         let skip = n - keep;
         let oldest = image.next_key - n as u64 + skip as u64;
         let mut fresh = Inner::new(&self.config, oldest);
         fresh.spec = image.spec.clone();
         fresh.next_key = oldest;
-        let mut ids: Vec<Option<u32>> = vec![None; n_obs];
+        let mut ids = Interned::new(n_obs);
         for i in skip..n {
-            let mut id_of = |fresh: &mut Inner, o: u32| -> Result<u32, BatchError> {
-                match ids[o as usize] {
-                    Some(id) => {
-                        fresh.store.retain(id);
-                        Ok(id)
-                    }
-                    None => {
-                        let bytes = image.observation(o as usize).ok_or_else(|| {
-                            BatchError::new(
-                                RejectReason::ObservationEncoding,
-                                format!("observations[{o}]"),
-                                "out of the data",
-                            )
-                        })?;
-                        let id = fresh.store.intern(bytes, content_hash(bytes));
-                        ids[o as usize] = Some(id);
-                        Ok(id)
-                    }
-                }
+            let Some(mut t) = image.items.get(i) else {
+                break;
             };
-            let o = id_of(&mut fresh, image.observation[i])?;
-            let no = id_of(&mut fresh, image.next_observation[i])?;
-            fresh.push_item(
-                &self.config,
-                image.actions[i],
-                image.rewards[i],
-                image.discounts[i],
-                image.priorities[i],
-                o,
-                no,
-            );
+            for o in [&mut t.observation, &mut t.next_observation] {
+                *o = ids.id(&mut fresh.store, *o, |o| {
+                    let bytes = image.observation(o).ok_or_else(|| {
+                        BatchError::new(
+                            RejectReason::ObservationEncoding,
+                            format!("observations[{o}]"),
+                            "out of the data",
+                        )
+                    })?;
+                    Ok((bytes, content_hash(bytes)))
+                })?;
+            }
+            fresh.push_item(&self.config, t);
         }
-        fresh.inserts_total = image.inserts_total;
-        fresh.samples_total = image.samples_total;
         fresh.priority_updates_total = image.priority_updates_total;
         fresh.ignored_updates_total = image.ignored_updates_total;
         fresh
             .limiter
-            .set_counts(image.limiter_counts.0, image.limiter_counts.1);
+            .set_counts(image.inserts_total, image.samples_total);
         *self.inner.lock() = fresh;
         self.after_change();
         Ok(skip)
@@ -650,18 +647,14 @@ struct RawSample {
     num_actions: u32,
     keys: Vec<u64>,
     weights: Vec<f32>,
-    priorities: Vec<f32>,
-    actions: Vec<u32>,
-    rewards: Vec<f32>,
-    discounts: Vec<f32>,
-    observation_index: Vec<u32>,
-    next_observation_index: Vec<u32>,
+    /// The index columns refer to `observations`.
+    columns: Columns,
     /// Store id and compact bytes of each distinct observation.
     observations: Vec<(u32, Vec<u8>)>,
 }
 
 impl RawSample {
-    fn finish(self) -> Result<Sample, TableError> {
+    fn finish(self) -> Result<Sample<TransitionBatch>, TableError> {
         let len = self.spec.num_values().unwrap_or(MAX_OBSERVATION_LEN);
         let mut pool = ObservationPool::new(ObservationEncoding::SparseF32);
         let mut wire = Vec::new();
@@ -673,19 +666,43 @@ impl RawSample {
         Ok(Sample {
             keys: self.keys,
             weights: self.weights,
-            priorities: self.priorities.clone(),
             batch: TransitionBatch {
                 spec: self.spec,
                 num_actions: self.num_actions,
-                actions: self.actions,
-                rewards: self.rewards,
-                discounts: self.discounts,
-                priorities: self.priorities,
+                columns: self.columns,
                 observations: pool,
-                observation_index: self.observation_index,
-                next_observation_index: self.next_observation_index,
             },
         })
+    }
+}
+
+/// Store ids of the observations of one batch or image: each entry is
+/// interned once, and every further use of it takes one more reference.
+struct Interned(Vec<Option<u32>>);
+
+impl Interned {
+    fn new(entries: usize) -> Self {
+        Self(vec![None; entries])
+    }
+
+    /// The store id of `entry`, interning what `bytes` gives (the entry's
+    /// bytes and content hash) on its first use. `entry` is in range
+    /// (checked by the caller).
+    fn id<'a, E>(
+        &mut self,
+        store: &mut ObservationStore,
+        entry: u32,
+        bytes: impl FnOnce(usize) -> Result<(&'a [u8], u64), E>,
+    ) -> Result<u32, E> {
+        let slot = &mut self.0[entry as usize];
+        if let Some(id) = *slot {
+            store.retain(id);
+            return Ok(id);
+        }
+        let (data, hash) = bytes(entry as usize)?;
+        let id = store.intern(data, hash);
+        *slot = Some(id);
+        Ok(id)
     }
 }
 
@@ -695,33 +712,19 @@ impl Inner {
             spec: None,
             tree: SumTree::new(config.capacity),
             store: ObservationStore::new(),
-            actions: Vec::new(),
-            rewards: Vec::new(),
-            discounts: Vec::new(),
-            priorities: Vec::new(),
-            observation: Vec::new(),
-            next_observation: Vec::new(),
+            items: Columns::default(),
             base_key,
             next_key: base_key,
             size: 0,
             rng: Xoshiro256PlusPlus::seed_from_u64(config.seed),
             limiter: RateLimiter::new(config.limiter),
-            inserts_total: 0,
-            samples_total: 0,
             priority_updates_total: 0,
             ignored_updates_total: 0,
         }
     }
 
     fn bytes(&self) -> usize {
-        self.tree.bytes()
-            + self.store.bytes()
-            + 4 * (self.actions.capacity()
-                + self.rewards.capacity()
-                + self.discounts.capacity()
-                + self.priorities.capacity()
-                + self.observation.capacity()
-                + self.next_observation.capacity())
+        self.tree.bytes() + self.store.bytes() + self.items.capacity_bytes()
     }
 
     fn check_spec(&self, batch: &PreparedBatch) -> Result<(), BatchError> {
@@ -758,41 +761,22 @@ impl Inner {
         newest - ((newest_slot + capacity - slot) % capacity) as u64
     }
 
-    /// Appends one item, evicting the oldest when full.
-    #[allow(clippy::too_many_arguments)]
-    fn push_item(
-        &mut self,
-        config: &TableConfig,
-        action: u32,
-        reward: f32,
-        discount: f32,
-        priority: f32,
-        observation: u32,
-        next_observation: u32,
-    ) {
+    /// Appends one item (its observations already store ids), evicting the
+    /// oldest when full.
+    fn push_item(&mut self, config: &TableConfig, item: Transition) {
         let capacity = config.capacity;
         let slot = ((self.next_key - self.base_key) % capacity as u64) as usize;
-        if slot < self.actions.len() {
+        if slot < self.items.len() {
             if self.size == capacity {
-                self.store.release(self.observation[slot]);
-                self.store.release(self.next_observation[slot]);
+                self.store.release(self.items.observation_index[slot]);
+                self.store.release(self.items.next_observation_index[slot]);
                 self.size -= 1;
             }
-            self.actions[slot] = action;
-            self.rewards[slot] = reward;
-            self.discounts[slot] = discount;
-            self.priorities[slot] = priority;
-            self.observation[slot] = observation;
-            self.next_observation[slot] = next_observation;
+            self.items.set(slot, item);
         } else {
-            self.actions.push(action);
-            self.rewards.push(reward);
-            self.discounts.push(discount);
-            self.priorities.push(priority);
-            self.observation.push(observation);
-            self.next_observation.push(next_observation);
+            self.items.push(item);
         }
-        self.tree.set(slot, Self::leaf(config, priority));
+        self.tree.set(slot, Self::leaf(config, item.priority));
         self.size += 1;
         self.next_key += 1;
     }
@@ -802,38 +786,21 @@ impl Inner {
             self.spec = Some((batch.spec.clone(), batch.num_actions));
         }
         let first_key = self.next_key;
-        let mut ids: Vec<Option<u32>> = vec![None; batch.entries.len()];
+        let mut ids = Interned::new(batch.entries.len());
         for i in 0..batch.len() {
-            let mut id_of = |store: &mut ObservationStore, pool_index: u32| {
-                let p = pool_index as usize;
-                match ids[p] {
-                    Some(id) => {
-                        store.retain(id);
-                        id
-                    }
-                    None => {
-                        let (hash, start, end) = batch.entries[p];
-                        let id = store.intern(&batch.bytes[start..end], hash);
-                        ids[p] = Some(id);
-                        id
-                    }
-                }
+            let Some(mut t) = batch.columns.get(i) else {
+                break;
             };
-            let o = id_of(&mut self.store, batch.observation_index[i]);
-            let no = id_of(&mut self.store, batch.next_observation_index[i]);
-            self.push_item(
-                config,
-                batch.actions[i],
-                batch.rewards[i],
-                batch.discounts[i],
-                batch.priorities[i],
-                o,
-                no,
-            );
+            for o in [&mut t.observation, &mut t.next_observation] {
+                let Ok(id) = ids.id(&mut self.store, *o, |p| {
+                    let (hash, start, end) = batch.entries[p];
+                    Ok::<_, Infallible>((&batch.bytes[start..end], hash))
+                });
+                *o = id;
+            }
+            self.push_item(config, t);
         }
-        let n = batch.len() as u64;
-        self.limiter.inserted(n);
-        self.inserts_total += n;
+        self.limiter.inserted(batch.len() as u64);
         Inserted {
             inserted: batch.len() as u32,
             size: self.size as u64,
@@ -861,50 +828,48 @@ impl Inner {
             .iter()
             .map(|l| ((floor / l).powf(beta)).min(1.0) as f32)
             .collect();
+        // Store ids become pool indices: states first, then next states.
+        let mut columns = self.items.gather(&slots);
         let mut distinct: Vec<(u32, Vec<u8>)> = Vec::new();
         let mut index_of = std::collections::HashMap::with_capacity(2 * n);
-        let mut pool_index = |store: &ObservationStore, id: u32| -> u32 {
-            *index_of.entry(id).or_insert_with(|| {
-                distinct.push((id, store.get(id).to_vec()));
+        for id in columns
+            .observation_index
+            .iter_mut()
+            .chain(columns.next_observation_index.iter_mut())
+        {
+            let store_id = *id;
+            *id = *index_of.entry(store_id).or_insert_with(|| {
+                distinct.push((store_id, self.store.get(store_id).to_vec()));
                 (distinct.len() - 1) as u32
-            })
-        };
-        let observation_index = slots
-            .iter()
-            .map(|s| pool_index(&self.store, self.observation[*s]))
-            .collect();
-        let next_observation_index = slots
-            .iter()
-            .map(|s| pool_index(&self.store, self.next_observation[*s]))
-            .collect();
+            });
+        }
         let (spec, num_actions) = self
             .spec
             .clone()
             .unwrap_or_else(|| (ObservationSpec::new("", Vec::new()), 0));
         self.limiter.sampled(n as u64);
-        self.samples_total += n as u64;
         RawSample {
             spec,
             num_actions,
             keys: slots.iter().map(|s| self.key_of(*s, capacity)).collect(),
             weights,
-            priorities: slots.iter().map(|s| self.priorities[*s]).collect(),
-            actions: slots.iter().map(|s| self.actions[*s]).collect(),
-            rewards: slots.iter().map(|s| self.rewards[*s]).collect(),
-            discounts: slots.iter().map(|s| self.discounts[*s]).collect(),
-            observation_index,
-            next_observation_index,
+            columns,
             observations: distinct,
         }
     }
 
-    fn update(&mut self, config: &TableConfig, keys: &[u64], priorities: &[f32]) -> Updated {
+    fn update(
+        &mut self,
+        config: &TableConfig,
+        keys: &[u64],
+        priorities: &[f32],
+    ) -> PrioritiesUpdated {
         let mut updated = 0;
         let mut ignored = 0;
         for (key, p) in keys.iter().zip(priorities) {
             match self.slot_of(*key, config.capacity) {
                 Some(slot) => {
-                    self.priorities[slot] = *p;
+                    self.items.priorities[slot] = *p;
                     self.tree.set(slot, Self::leaf(config, *p));
                     updated += 1;
                 }
@@ -913,20 +878,21 @@ impl Inner {
         }
         self.priority_updates_total += u64::from(updated);
         self.ignored_updates_total += u64::from(ignored);
-        Updated { updated, ignored }
+        PrioritiesUpdated { updated, ignored }
     }
 
     fn image(&self) -> TableImage {
         let capacity = self.tree.capacity();
         let oldest = self.next_key - self.size as u64;
+        let (inserts_total, samples_total) = self.limiter.counts();
         let mut image = TableImage {
             spec: self.spec.clone(),
             next_key: self.next_key,
-            inserts_total: self.inserts_total,
-            samples_total: self.samples_total,
+            inserts_total,
+            samples_total,
             priority_updates_total: self.priority_updates_total,
             ignored_updates_total: self.ignored_updates_total,
-            limiter_counts: self.limiter.counts(),
+            items: Columns::with_capacity(self.size),
             ..TableImage::default()
         };
         let mut renumber = std::collections::HashMap::with_capacity(self.store.len());
@@ -941,14 +907,12 @@ impl Inner {
         };
         for key in oldest..self.next_key {
             let slot = ((key - self.base_key) % capacity as u64) as usize;
-            image.actions.push(self.actions[slot]);
-            image.rewards.push(self.rewards[slot]);
-            image.discounts.push(self.discounts[slot]);
-            image.priorities.push(self.priorities[slot]);
-            let o = number(&mut image, self.observation[slot]);
-            let no = number(&mut image, self.next_observation[slot]);
-            image.observation.push(o);
-            image.next_observation.push(no);
+            let Some(mut t) = self.items.get(slot) else {
+                continue;
+            };
+            t.observation = number(&mut image, t.observation);
+            t.next_observation = number(&mut image, t.next_observation);
+            image.items.push(t);
         }
         image
     }

@@ -3,11 +3,12 @@
 //!
 //! [`ReplayClient`] wraps the generated client: it converts domain batches
 //! to the wire and back (validating what the server sends), answers in
-//! domain types ([`Sampled`], [`TableInfo`], [`JoinedActor`],
-//! [`SnapshotWritten`], ...), bounds every wait by a timeout, and turns
-//! statuses into [`ClientError`]s that say whether a retry can help. [`InsertStream`] is one streaming insert: send
-//! batches, receive an acknowledgement per batch once its transitions are in
-//! the table.
+//! domain types ([`Sample`], [`PrioritiesUpdated`], [`TableInfo`],
+//! [`JoinedActor`], [`SnapshotWritten`], ...), bounds every wait by a
+//! timeout, and turns statuses into [`ClientError`]s that say whether a
+//! retry can help. [`InsertStream`] is one streaming insert: send batches,
+//! receive an acknowledgement per batch once its transitions are in the
+//! table.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
@@ -15,7 +16,8 @@ use std::time::Duration;
 use crossroads_config::TransportConfig;
 use crossroads_proto::v1 as pb;
 use crossroads_proto::v1::replay_client::ReplayClient as PbClient;
-use crossroads_types::batch::{BatchError, RejectReason, TransitionBatch};
+use crossroads_types::batch::{BatchError, TransitionBatch};
+use crossroads_types::{PrioritiesUpdated, Sample};
 use tokio::sync::mpsc;
 use tonic::transport::{Channel, Endpoint};
 
@@ -89,30 +91,6 @@ impl From<tonic::Status> for ClientError {
             message: s.message().to_owned(),
         }
     }
-}
-
-/// A sampled batch: the items, and beside them what the learner needs to
-/// weight the loss and update priorities.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Sampled {
-    /// Item keys, in batch order; name them in
-    /// [`ReplayClient::update_priorities`].
-    pub keys: Vec<u64>,
-    /// Importance weights, in batch order, at most 1.
-    pub weights: Vec<f32>,
-    /// Priorities the items had when sampled.
-    pub priorities: Vec<f32>,
-    /// The transitions.
-    pub batch: TransitionBatch,
-}
-
-/// What the server did with a priority update.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PriorityUpdate {
-    /// Keys updated.
-    pub updated: u32,
-    /// Keys of items evicted since they were sampled.
-    pub ignored: u32,
 }
 
 /// The acknowledgement of one inserted batch.
@@ -196,32 +174,6 @@ pub struct SnapshotWritten {
     pub duration_seconds: f64,
 }
 
-impl From<pb::TableInfo> for TableInfo {
-    fn from(i: pb::TableInfo) -> Self {
-        Self {
-            name: i.name,
-            size: i.size,
-            capacity: i.capacity,
-            inserts_total: i.inserts_total,
-            samples_total: i.samples_total,
-            priority_updates_total: i.priority_updates_total,
-            ignored_updates_total: i.ignored_updates_total,
-            rejections_total: i.rejections_total.into_iter().collect(),
-            rate_limiter: i.rate_limiter.map(|r| RateLimiterInfo {
-                min_size_to_sample: r.min_size_to_sample,
-                samples_per_insert: r.samples_per_insert,
-                error_tolerance: r.error_tolerance,
-                can_sample: r.can_sample,
-                can_insert: r.can_insert,
-                sample_waits_total: r.sample_waits_total,
-                insert_waits_total: r.insert_waits_total,
-            }),
-            bytes_stored: i.bytes_stored,
-            last_snapshot_unix_ms: i.last_snapshot_unix_ms,
-        }
-    }
-}
-
 /// A connection to the replay server, for one table. Cheap to clone
 /// (clones share the HTTP/2 connection).
 #[derive(Debug, Clone)]
@@ -262,6 +214,12 @@ impl ReplayClient {
         &self.table
     }
 
+    /// The generated client, for one call (clones share the connection).
+    fn rpc(&self) -> PbClient<Channel> {
+        self.inner.clone()
+    }
+
+    /// Waits for `call` at most the request timeout plus `extra`.
     async fn bounded<T>(
         &self,
         extra: Duration,
@@ -275,53 +233,31 @@ impl ReplayClient {
         }
     }
 
+    /// Waits for `call` at most the request timeout.
+    async fn call<T>(
+        &self,
+        call: impl Future<Output = Result<tonic::Response<T>, tonic::Status>>,
+    ) -> Result<T, ClientError> {
+        self.bounded(Duration::ZERO, call).await
+    }
+
     /// Samples `batch_size` items with importance exponent `beta`, waiting
     /// at most `wait` for the rate limiter (zero: the server's default).
+    /// The batch is validated on arrival.
     pub async fn sample(
         &self,
         batch_size: u32,
         beta: f32,
         wait: Duration,
-    ) -> Result<Sampled, ClientError> {
+    ) -> Result<Sample, ClientError> {
         let request = pb::SampleRequest {
             table: self.table.clone(),
             batch_size,
             beta,
             timeout_ms: u32::try_from(wait.as_millis()).unwrap_or(u32::MAX),
         };
-        let mut inner = self.inner.clone();
-        let response = self.bounded(wait, inner.sample(request)).await?;
-        let batch = response
-            .batch
-            .ok_or_else(|| {
-                BatchError::new(
-                    RejectReason::BadRequest,
-                    "batch",
-                    "missing from the sample response",
-                )
-            })
-            .and_then(wire::batch_from_wire)?;
-        let n = batch.len();
-        if response.keys.len() != n || response.weights.len() != n || response.priorities.len() != n
-        {
-            return Err(BatchError::new(
-                RejectReason::LengthMismatch,
-                "keys",
-                format!(
-                    "{} keys, {} weights, {} priorities for {n} transitions",
-                    response.keys.len(),
-                    response.weights.len(),
-                    response.priorities.len()
-                ),
-            )
-            .into());
-        }
-        Ok(Sampled {
-            keys: response.keys,
-            weights: response.weights,
-            priorities: response.priorities,
-            batch,
-        })
+        let response = self.bounded(wait, self.rpc().sample(request)).await?;
+        Ok(wire::sample_from_wire(response)?)
     }
 
     /// Sets new priorities (finite, >= 0) of sampled items.
@@ -329,17 +265,14 @@ impl ReplayClient {
         &self,
         keys: Vec<u64>,
         priorities: Vec<f32>,
-    ) -> Result<PriorityUpdate, ClientError> {
+    ) -> Result<PrioritiesUpdated, ClientError> {
         let request = pb::UpdatePrioritiesRequest {
             table: self.table.clone(),
             keys,
             priorities,
         };
-        let mut inner = self.inner.clone();
-        let r = self
-            .bounded(Duration::ZERO, inner.update_priorities(request))
-            .await?;
-        Ok(PriorityUpdate {
+        let r = self.call(self.rpc().update_priorities(request)).await?;
+        Ok(PrioritiesUpdated {
             updated: r.updated,
             ignored: r.ignored,
         })
@@ -347,23 +280,19 @@ impl ReplayClient {
 
     /// Size, counters and rate-limiter state of the table.
     pub async fn info(&self) -> Result<TableInfo, ClientError> {
-        let mut inner = self.inner.clone();
         let request = pb::InfoRequest {
             table: self.table.clone(),
         };
-        let info = self.bounded(Duration::ZERO, inner.info(request)).await?;
-        Ok(info.into())
+        let info = self.call(self.rpc().info(request)).await?;
+        Ok(wire::table_info_from_wire(info))
     }
 
     /// Asks the server for this actor's index, naming it `name` (see the
     /// `JoinActor` call).
     pub async fn join_actor(&self, name: &str) -> Result<JoinedActor, ClientError> {
-        let mut inner = self.inner.clone();
-        let request = pb::JoinActorRequest {
-            name: name.to_owned(),
-        };
+        let name = name.to_owned();
         let r = self
-            .bounded(Duration::ZERO, inner.join_actor(request))
+            .call(self.rpc().join_actor(pb::JoinActorRequest { name }))
             .await?;
         Ok(JoinedActor {
             index: r.index,
@@ -373,9 +302,8 @@ impl ReplayClient {
 
     /// Asks the server to write a snapshot now; returns its path and size.
     pub async fn snapshot(&self) -> Result<SnapshotWritten, ClientError> {
-        let mut inner = self.inner.clone();
         let r = self
-            .bounded(Duration::ZERO, inner.snapshot(pb::SnapshotRequest {}))
+            .call(self.rpc().snapshot(pb::SnapshotRequest {}))
             .await?;
         Ok(SnapshotWritten {
             path: r.path,
@@ -390,9 +318,8 @@ impl ReplayClient {
     pub async fn insert_stream(&self, window: usize) -> Result<InsertStream, ClientError> {
         let window = window.max(1);
         let (tx, rx) = mpsc::channel(window);
-        let mut inner = self.inner.clone();
-        let call = inner.insert(tokio_stream::wrappers::ReceiverStream::new(rx));
-        let acks = self.bounded(Duration::ZERO, call).await?;
+        let stream = tokio_stream::wrappers::ReceiverStream::new(rx);
+        let acks = self.call(self.rpc().insert(stream)).await?;
         Ok(InsertStream {
             tx,
             acks,

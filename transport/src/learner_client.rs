@@ -95,8 +95,10 @@ pub struct LearnerStatus {
     pub config_toml: String,
 }
 
-impl From<pb::LearnerStatus> for LearnerStatus {
-    fn from(s: pb::LearnerStatus) -> Self {
+impl LearnerStatus {
+    /// From the wire (private: no prost type in the crate's public API
+    /// outside `convert` and `wire`).
+    fn from_wire(s: pb::LearnerStatus) -> Self {
         Self {
             update_step: s.update_step,
             weights_version: s.weights_version,
@@ -222,7 +224,7 @@ impl LearnerClient {
         let status = self
             .bounded(c.status(self.request(pb::StatusRequest {})?))
             .await?;
-        Ok(status.into())
+        Ok(LearnerStatus::from_wire(status))
     }
 
     /// Reports an evaluation of a weights version.

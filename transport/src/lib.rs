@@ -8,8 +8,9 @@
 //! - [`shm`]: transition batches in iceoryx2 shared memory for actors on
 //!   the replay server's host: the `#[repr(C)]` frame, both services (the
 //!   replay server reads the frames) and [`ShmBatchPublisher`].
-//! - [`wire`]: transition batches between `crossroads_proto` and the
-//!   domain, validating at the boundary.
+//! - [`wire`]: the replay's messages (transition batches, samples, table
+//!   descriptions) between `crossroads_proto` and the domain, validating at
+//!   the boundary.
 //! - [`learner_client`]: [`LearnerClient`], the learner service's client
 //!   (weights for actors; status, evaluations and checkpoints for the CLI).
 //! - [`weights_shm`]: weights in iceoryx2 shared memory, the learner's
@@ -24,9 +25,9 @@
 //! actors reach the learner through this crate, not through
 //! `crossroads_learner` and its optimizer state. Public functions answer in
 //! domain types (`crossroads_types` and the structs here); prost types
-//! appear only in the conversions ([`wire`], [`convert`] and `From`
-//! impls), and outside this crate only in `crossroads_proto` and the tonic
-//! services that implement it.
+//! appear only in the conversions ([`wire`], [`convert`]), and outside this
+//! crate only in `crossroads_proto` and the tonic services that implement
+//! it.
 
 pub mod convert;
 pub mod grpc;
@@ -37,8 +38,8 @@ pub mod wire;
 
 pub use convert::{CheckpointSummary, PublishedWeights};
 pub use grpc::{
-    ClientError, InsertAck, InsertStream, JoinedActor, PriorityUpdate, RateLimiterInfo,
-    ReplayClient, Sampled, SnapshotWritten, TableInfo,
+    ClientError, InsertAck, InsertStream, JoinedActor, RateLimiterInfo, ReplayClient,
+    SnapshotWritten, TableInfo,
 };
 pub use learner_client::{LearnerClient, LearnerClientError, LearnerStatus, WeightsSubscription};
 pub use shm::{ShmBatchPublisher, ShmError};

@@ -10,8 +10,9 @@
 //! are defined once. The server answers every batch on
 //! `<prefix>/replay/<table>/acks` ([`open_ack_service`]) with a
 //! [`ShmInsertAck`] naming the publisher and batch, once the batch is stored
-//! (or rejected). [`ShmBatchPublisher`] is the actor's side: it validates,
-//! writes into a loaned slot and sends, and collects its acknowledgements; a
+//! (or rejected). [`ShmBatchPublisher`] is the actor's side: it writes a
+//! [`ValidBatch`] into a loaned slot and sends, and collects its
+//! acknowledgements; the server validates what it reads, once; a
 //! send never waits longer than the configured timeout, and fails when no
 //! replay server is listening, so a writer never hangs on a dead server.
 //! Batches still queued when their publisher goes away are dropped by
@@ -30,9 +31,10 @@ use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crossroads_config::TransportConfig;
 use crossroads_types::batch::{
-    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch,
+    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch, ValidBatch,
 };
 use crossroads_types::codec::ObservationEncoding;
+use crossroads_types::columns::{Columns, ROW_BYTES};
 
 /// `CRB1`, little-endian: marks a frame of this format.
 pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"CRB1");
@@ -114,7 +116,7 @@ impl BatchFrameHeader {
     pub fn for_batch(
         table: &str,
         batch_id: u64,
-        batch: &TransitionBatch,
+        batch: &ValidBatch,
     ) -> Result<(Self, usize), BatchError> {
         let mut h = Self {
             magic: FRAME_MAGIC,
@@ -132,38 +134,18 @@ impl BatchFrameHeader {
             .map_err(|_| too_big("observations.data", "more than 4 GiB".into()))?;
         h.num_actions = batch.num_actions;
         h.encoding = batch.observations.encoding().to_wire();
-        if batch.spec.shape.len() > MAX_RANK {
-            return Err(too_big(
-                "spec.shape",
-                format!("rank {} is above {MAX_RANK}", batch.spec.shape.len()),
-            ));
-        }
-        h.rank = batch.spec.shape.len() as u32;
-        h.shape[..batch.spec.shape.len()].copy_from_slice(&batch.spec.shape);
+        let rank_above = |n, max| format!("rank {n} is above {max}");
+        let bytes_above = |n, max| format!("{n} bytes is above {max}");
+        h.rank = copy_fixed("spec.shape", &batch.spec.shape, &mut h.shape, rank_above)?;
         let kind = batch.spec.kind.as_bytes();
-        if kind.len() > MAX_KIND {
-            return Err(too_big(
-                "spec.kind",
-                format!("{} bytes is above {MAX_KIND}", kind.len()),
-            ));
-        }
-        h.kind_len = kind.len() as u32;
-        h.kind[..kind.len()].copy_from_slice(kind);
-        let table = table.as_bytes();
-        if table.len() > MAX_TABLE {
-            return Err(too_big(
-                "table",
-                format!("{} bytes is above {MAX_TABLE}", table.len()),
-            ));
-        }
-        h.table_len = table.len() as u32;
-        h.table[..table.len()].copy_from_slice(table);
+        h.kind_len = copy_fixed("spec.kind", kind, &mut h.kind, bytes_above)?;
+        h.table_len = copy_fixed("table", table.as_bytes(), &mut h.table, bytes_above)?;
         Ok((h, h.payload_len()))
     }
 
     /// Payload bytes this header announces.
     pub fn payload_len(&self) -> usize {
-        24 * self.num_transitions as usize
+        ROW_BYTES * self.num_transitions as usize
             + 4 * self.num_observations as usize
             + self.data_len as usize
     }
@@ -176,6 +158,27 @@ impl BatchFrameHeader {
         std::str::from_utf8(bytes)
             .map_err(|_| BatchError::new(RejectReason::BadRequest, "table", "not UTF-8"))
     }
+}
+
+/// Copies `items` into the start of the fixed array `into`; returns how
+/// many. `Oversized`, naming `field`, with `too_long(len, capacity)` as the
+/// problem, when they do not fit.
+fn copy_fixed<T: Copy>(
+    field: &str,
+    items: &[T],
+    into: &mut [T],
+    too_long: impl FnOnce(usize, usize) -> String,
+) -> Result<u32, BatchError> {
+    let capacity = into.len();
+    let slot = into.get_mut(..items.len()).ok_or_else(|| {
+        BatchError::new(
+            RejectReason::Oversized,
+            field,
+            too_long(items.len(), capacity),
+        )
+    })?;
+    slot.copy_from_slice(items);
+    Ok(items.len() as u32)
 }
 
 /// The server's answer to one batch, on the acks service. Plain data
@@ -243,31 +246,15 @@ impl ShmInsertAck {
 
 /// Writes `batch`'s columns and pool into `out`, which is exactly
 /// [`BatchFrameHeader::payload_len`] bytes.
-pub fn write_frame(batch: &TransitionBatch, out: &mut [u8]) {
-    let mut at = 0;
-    let mut put = |bytes: [u8; 4]| {
-        out[at..at + 4].copy_from_slice(&bytes);
-        at += 4;
-    };
-    batch.actions.iter().for_each(|v| put(v.to_le_bytes()));
-    batch.rewards.iter().for_each(|v| put(v.to_le_bytes()));
-    batch.discounts.iter().for_each(|v| put(v.to_le_bytes()));
-    batch.priorities.iter().for_each(|v| put(v.to_le_bytes()));
-    batch
-        .observation_index
-        .iter()
-        .for_each(|v| put(v.to_le_bytes()));
-    batch
-        .next_observation_index
-        .iter()
-        .for_each(|v| put(v.to_le_bytes()));
-    batch
-        .observations
-        .offsets()
-        .iter()
-        .for_each(|v| put(v.to_le_bytes()));
-    let data = batch.observations.data();
-    out[at..at + data.len()].copy_from_slice(data);
+pub fn write_frame(batch: &ValidBatch, out: &mut [u8]) {
+    let (columns, rest) = out.split_at_mut(batch.columns.byte_len());
+    batch.columns.write_le(columns);
+    let pool = &batch.observations;
+    let (offsets, data) = rest.split_at_mut(4 * pool.len());
+    for (word, offset) in offsets.chunks_exact_mut(4).zip(pool.offsets()) {
+        word.copy_from_slice(&offset.to_le_bytes());
+    }
+    data.copy_from_slice(pool.data());
 }
 
 /// Reads a frame into a validated batch; returns the table it is for and
@@ -276,7 +263,7 @@ pub fn write_frame(batch: &TransitionBatch, out: &mut [u8]) {
 pub fn read_frame(
     header: &BatchFrameHeader,
     payload: &[u8],
-) -> Result<(String, u64, TransitionBatch), BatchError> {
+) -> Result<(String, u64, ValidBatch), BatchError> {
     let bad =
         |field: &str, problem: String| BatchError::new(RejectReason::BadRequest, field, problem);
     if header.magic != FRAME_MAGIC || header.version != FRAME_VERSION {
@@ -318,40 +305,19 @@ pub fn read_frame(
     })?;
     let n = header.num_transitions as usize;
     let m = header.num_observations as usize;
-    let words = |at: usize, count: usize| -> Vec<[u8; 4]> {
-        payload[at..at + 4 * count]
-            .chunks_exact(4)
-            .map(|c| [c[0], c[1], c[2], c[3]])
-            .collect()
-    };
-    let u32s = |at, count| {
-        words(at, count)
-            .into_iter()
-            .map(u32::from_le_bytes)
-            .collect()
-    };
-    let f32s = |at, count| {
-        words(at, count)
-            .into_iter()
-            .map(f32::from_le_bytes)
-            .collect()
-    };
-    let batch = TransitionBatch {
+    let (columns, rest) = payload.split_at(ROW_BYTES * n);
+    let (offsets, data) = rest.split_at(4 * m);
+    let offsets = offsets
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let batch = ValidBatch::new(TransitionBatch {
         spec: ObservationSpec::new(kind, shape),
         num_actions: header.num_actions,
-        actions: u32s(0, n),
-        rewards: f32s(4 * n, n),
-        discounts: f32s(8 * n, n),
-        priorities: f32s(12 * n, n),
-        observation_index: u32s(16 * n, n),
-        next_observation_index: u32s(20 * n, n),
-        observations: ObservationPool::from_parts(
-            encoding,
-            u32s(24 * n, m),
-            payload[24 * n + 4 * m..].to_vec(),
-        ),
-    };
-    batch.validate()?;
+        // Whole rows: the payload's length is the header's.
+        columns: Columns::read_le(columns).unwrap_or_default(),
+        observations: ObservationPool::from_parts(encoding, offsets, data.to_vec()),
+    })?;
     Ok((table, header.batch_id, batch))
 }
 
@@ -381,7 +347,7 @@ pub enum ShmError {
         /// iceoryx2's error.
         message: String,
     },
-    /// The batch is not valid; it was not sent.
+    /// The batch does not fit a frame; it was not sent.
     #[error("invalid batch: {0}")]
     Invalid(#[from] BatchError),
     /// No replay server is subscribed; the batch was not delivered.
@@ -431,6 +397,12 @@ pub fn node() -> Result<Node<ipc::Service>, ShmError> {
         .map_err(|e| ShmError::iceoryx("creating node", e))
 }
 
+/// `name` as an iceoryx2 service name.
+pub fn iceoryx_name(name: &str) -> Result<ServiceName, ShmError> {
+    name.try_into()
+        .map_err(|e| ShmError::iceoryx("service name", e))
+}
+
 /// Opens (or creates) the insert service of `table`, with the settings both
 /// sides share: no history, no overflow (a full queue pushes back on the
 /// publisher instead of dropping batches), `shm_buffer` batches queued.
@@ -439,11 +411,7 @@ pub fn open_batch_service(
     config: &TransportConfig,
     table: &str,
 ) -> Result<PortFactory<ipc::Service, [u8], BatchFrameHeader>, ShmError> {
-    let name = service_name(&config.shm_prefix, table);
-    let name: ServiceName = name
-        .as_str()
-        .try_into()
-        .map_err(|e| ShmError::iceoryx("service name", e))?;
+    let name = iceoryx_name(&service_name(&config.shm_prefix, table))?;
     node.service_builder(&name)
         .publish_subscribe::<[u8]>()
         .user_header::<BatchFrameHeader>()
@@ -465,11 +433,7 @@ pub fn open_ack_service(
     config: &TransportConfig,
     table: &str,
 ) -> Result<PortFactory<ipc::Service, ShmInsertAck, ()>, ShmError> {
-    let name = ack_service_name(&config.shm_prefix, table);
-    let name: ServiceName = name
-        .as_str()
-        .try_into()
-        .map_err(|e| ShmError::iceoryx("service name", e))?;
+    let name = iceoryx_name(&ack_service_name(&config.shm_prefix, table))?;
     node.service_builder(&name)
         .publish_subscribe::<ShmInsertAck>()
         .enable_safe_overflow(true)
@@ -494,8 +458,8 @@ pub struct ShmAck {
 /// An actor's publisher of batches to the replay server on this host.
 ///
 /// Not `Send`: create and use it on one thread. Each [`send`](Self::send)
-/// validates the batch, writes it into shared memory once and hands it to
-/// the server's queue; it waits at most `shm_send_timeout_ms` when the queue
+/// writes a validated batch into shared memory once and hands it to the
+/// server's queue; it waits at most `shm_send_timeout_ms` when the queue
 /// is full and fails when no server listens, so the caller can buffer and
 /// retry (or fall back to gRPC). [`poll_acks`](Self::poll_acks) returns the
 /// server's answers (stored or rejected) for batches sent;
@@ -578,11 +542,11 @@ impl ShmBatchPublisher {
         self.in_flight.iter().copied()
     }
 
-    /// Validates and sends one batch. `Ok` means a replay server's queue
-    /// holds it; the server validates again, stores it and answers (see
-    /// [`poll_acks`](Self::poll_acks)).
-    pub fn send(&mut self, batch_id: u64, batch: &TransitionBatch) -> Result<(), ShmError> {
-        batch.validate()?;
+    /// Sends one batch. `Ok` means a replay server's queue holds it; the
+    /// server validates it (it trusts nothing from another process), stores
+    /// it and answers (see [`poll_acks`](Self::poll_acks)).
+    /// [`ShmError::Invalid`] means it does not fit a frame.
+    pub fn send(&mut self, batch_id: u64, batch: &ValidBatch) -> Result<(), ShmError> {
         let (header, len) = BatchFrameHeader::for_batch(&self.table, batch_id, batch)?;
         let mut sample = self
             .publisher
@@ -692,12 +656,22 @@ mod tests {
                 next_observation: o1,
             });
         }
+        let b = ValidBatch::new(b).expect("valid");
         let (header, len) = BatchFrameHeader::for_batch("t", 42, &b).expect("fits");
         let mut payload = vec![0; len];
         write_frame(&b, &mut payload);
         let (table, id, back) = read_frame(&header, &payload).expect("valid");
         assert_eq!((table.as_str(), id), ("t", 42));
         assert_eq!(back, b);
+
+        let mut long = b.clone().into_inner();
+        long.spec.kind = "k".repeat(MAX_KIND + 1);
+        let long = ValidBatch::new(long).expect("valid, only too long for a frame");
+        let err = BatchFrameHeader::for_batch("t", 0, &long).expect_err("kind too long");
+        assert_eq!(err.to_string(), "spec.kind: 33 bytes is above 32");
+        let err =
+            BatchFrameHeader::for_batch(&"t".repeat(MAX_TABLE + 1), 0, &b).expect_err("table");
+        assert_eq!(err.to_string(), "table: 65 bytes is above 64");
 
         let err = read_frame(&header, &payload[..len - 1]).expect_err("short");
         assert_eq!(err.field, "payload");

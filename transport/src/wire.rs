@@ -1,17 +1,21 @@
-//! Conversion of transition batches between the wire
-//! (`crossroads_proto::v1`) and the domain (`crossroads_types::batch`),
-//! validating at the boundary: a wire batch becomes a [`TransitionBatch`]
-//! only if [`TransitionBatch::validate`] accepts it.
+//! Conversion of the replay's messages between the wire
+//! (`crossroads_proto::v1`) and the domain (`crossroads_types`), validating
+//! at the boundary: a wire batch becomes a [`ValidBatch`] only if
+//! [`TransitionBatch::validate`] accepts it, so this is the one check a
+//! received batch gets.
 
 use crossroads_proto::v1 as pb;
 use crossroads_types::batch::{
-    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch,
+    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch, ValidBatch,
 };
 use crossroads_types::codec::ObservationEncoding;
+use crossroads_types::{Columns, Sample};
+
+use crate::grpc::{RateLimiterInfo, TableInfo};
 
 /// A wire batch as a validated domain batch. Errors name the field as the
 /// wire calls it (`rewards[3]`, `observations.encoding`, ...).
-pub fn batch_from_wire(batch: pb::TransitionBatch) -> Result<TransitionBatch, BatchError> {
+pub fn batch_from_wire(batch: pb::TransitionBatch) -> Result<ValidBatch, BatchError> {
     let spec = batch
         .spec
         .ok_or_else(|| BatchError::new(RejectReason::Spec, "spec", "missing observation spec"))?;
@@ -35,44 +39,114 @@ pub fn batch_from_wire(batch: pb::TransitionBatch) -> Result<TransitionBatch, Ba
                 ),
             )
         })?;
-    let batch = TransitionBatch {
+    ValidBatch::new(TransitionBatch {
         spec: ObservationSpec {
             kind: spec.kind,
             shape: spec.shape,
         },
         num_actions: batch.num_actions,
-        actions: batch.actions,
-        rewards: batch.rewards,
-        discounts: batch.discounts,
-        priorities: batch.priorities,
+        columns: Columns {
+            actions: batch.actions,
+            rewards: batch.rewards,
+            discounts: batch.discounts,
+            priorities: batch.priorities,
+            observation_index: batch.observation_index,
+            next_observation_index: batch.next_observation_index,
+        },
         observations: ObservationPool::from_parts(encoding, pool.offsets, pool.data),
-        observation_index: batch.observation_index,
-        next_observation_index: batch.next_observation_index,
-    };
-    batch.validate()?;
-    Ok(batch)
+    })
 }
 
 /// A domain batch on the wire.
 pub fn batch_to_wire(batch: TransitionBatch) -> pb::TransitionBatch {
     let (encoding, offsets, data) = batch.observations.into_parts();
+    let c = batch.columns;
     pb::TransitionBatch {
         spec: Some(pb::ObservationSpec {
             kind: batch.spec.kind,
             shape: batch.spec.shape,
         }),
         num_actions: batch.num_actions,
-        actions: batch.actions,
-        rewards: batch.rewards,
-        discounts: batch.discounts,
-        priorities: batch.priorities,
+        actions: c.actions,
+        rewards: c.rewards,
+        discounts: c.discounts,
+        priorities: c.priorities,
         observations: Some(pb::ObservationPool {
             encoding: encoding.to_wire() as i32,
             offsets,
             data,
         }),
-        observation_index: batch.observation_index,
-        next_observation_index: batch.next_observation_index,
+        observation_index: c.observation_index,
+        next_observation_index: c.next_observation_index,
+    }
+}
+
+/// A sample as the replay server answers it. The wire repeats the
+/// priorities beside the batch; they are the batch's `priorities` column.
+pub fn sample_to_wire(sample: Sample<TransitionBatch>) -> pb::SampleResponse {
+    pb::SampleResponse {
+        keys: sample.keys,
+        weights: sample.weights,
+        priorities: sample.batch.columns.priorities.clone(),
+        batch: Some(batch_to_wire(sample.batch)),
+    }
+}
+
+/// A sample response as a domain sample: the batch validated, and one key,
+/// weight and priority per transition.
+pub fn sample_from_wire(response: pb::SampleResponse) -> Result<Sample, BatchError> {
+    let batch = response
+        .batch
+        .ok_or_else(|| {
+            BatchError::new(
+                RejectReason::BadRequest,
+                "batch",
+                "missing from the sample response",
+            )
+        })
+        .and_then(batch_from_wire)?;
+    let n = batch.len();
+    if response.keys.len() != n || response.weights.len() != n || response.priorities.len() != n {
+        return Err(BatchError::new(
+            RejectReason::LengthMismatch,
+            "keys",
+            format!(
+                "{} keys, {} weights, {} priorities for {n} transitions",
+                response.keys.len(),
+                response.weights.len(),
+                response.priorities.len()
+            ),
+        ));
+    }
+    Ok(Sample {
+        keys: response.keys,
+        weights: response.weights,
+        batch,
+    })
+}
+
+/// A table's description from the wire.
+pub fn table_info_from_wire(i: pb::TableInfo) -> TableInfo {
+    TableInfo {
+        name: i.name,
+        size: i.size,
+        capacity: i.capacity,
+        inserts_total: i.inserts_total,
+        samples_total: i.samples_total,
+        priority_updates_total: i.priority_updates_total,
+        ignored_updates_total: i.ignored_updates_total,
+        rejections_total: i.rejections_total.into_iter().collect(),
+        rate_limiter: i.rate_limiter.map(|r| RateLimiterInfo {
+            min_size_to_sample: r.min_size_to_sample,
+            samples_per_insert: r.samples_per_insert,
+            error_tolerance: r.error_tolerance,
+            can_sample: r.can_sample,
+            can_insert: r.can_insert,
+            sample_waits_total: r.sample_waits_total,
+            insert_waits_total: r.insert_waits_total,
+        }),
+        bytes_stored: i.bytes_stored,
+        last_snapshot_unix_ms: i.last_snapshot_unix_ms,
     }
 }
 
@@ -98,7 +172,10 @@ mod tests {
             next_observation: o,
         });
         let wire = batch_to_wire(b.clone());
-        assert_eq!(batch_from_wire(wire.clone()), Ok(b));
+        assert_eq!(
+            batch_from_wire(wire.clone()).map(ValidBatch::into_inner),
+            Ok(b)
+        );
 
         let mut bad = wire.clone();
         bad.observations.as_mut().expect("pool").encoding = 7;
@@ -108,5 +185,43 @@ mod tests {
         let mut bad = wire;
         bad.spec = None;
         assert_eq!(batch_from_wire(bad).expect_err("no spec").field, "spec");
+    }
+
+    #[test]
+    fn a_sample_carries_its_priorities_once() {
+        let mut b = TransitionBatch::new(
+            ObservationSpec::new("toy", [2]),
+            2,
+            ObservationEncoding::SparseF32,
+        );
+        let o = b.push_observation(&[0.0, 1.0]);
+        for priority in [0.5, 2.0] {
+            b.push(Transition {
+                observation: o,
+                action: 0,
+                reward: 0.0,
+                discount: 1.0,
+                priority,
+                next_observation: o,
+            });
+        }
+        let sample = Sample {
+            keys: vec![7, 9],
+            weights: vec![1.0, 0.5],
+            batch: b.clone(),
+        };
+        let wire = sample_to_wire(sample);
+        assert_eq!(wire.priorities, [0.5, 2.0], "the wire repeats them");
+        let back = sample_from_wire(wire.clone()).expect("valid");
+        assert_eq!((back.keys, back.weights), (vec![7, 9], vec![1.0, 0.5]));
+        assert_eq!(back.batch.into_inner(), b);
+
+        let mut short = wire;
+        short.weights.pop();
+        let err = sample_from_wire(short).expect_err("a weight short");
+        assert_eq!(
+            err.to_string(),
+            "keys: 2 keys, 1 weights, 2 priorities for 2 transitions"
+        );
     }
 }

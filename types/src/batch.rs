@@ -1,16 +1,19 @@
 //! The domain transition batch: n-step transitions as struct-of-arrays, with
 //! an observation pool that holds each observation once.
 //!
-//! [`TransitionBatch`] is what actors build ([`TransitionBatch::push`]),
+//! [`TransitionBatch`] is what actors build ([`TransitionBatch::push`]) and
 //! transports carry (converted to the wire in `crossroads_transport::wire`
-//! and `crossroads_transport::shm`) and the replay server stores. Its
-//! [`TransitionBatch::validate`] is the one check applied at every boundary;
-//! a [`BatchError`] names the offending field and carries a
-//! [`RejectReason`] for counters.
+//! and `crossroads_transport::shm`); its [`Columns`] are the six
+//! per-transition columns. [`ValidBatch`] is a batch that passed
+//! [`TransitionBatch::validate`], the one check: made where a batch enters
+//! a process, it is what the replay server stores and the learner trains
+//! on, never checked again. A [`BatchError`] names the offending field and
+//! carries a [`RejectReason`] for counters.
 
 use std::fmt;
 
 use crate::codec::{self, CodecError, ObservationEncoding};
+use crate::columns::Columns;
 
 /// Largest observation accepted, in values (a guard against shapes whose
 /// product overflows or exhausts memory).
@@ -174,28 +177,23 @@ pub struct Transition {
     pub next_observation: u32,
 }
 
-/// A batch of n-step transitions, struct-of-arrays: entry `i` of every
-/// column belongs to transition `i`.
+/// A batch of n-step transitions, struct-of-arrays: row `i` of the
+/// [`Columns`] is transition `i`, its index columns refer to entries of the
+/// [`ObservationPool`].
+///
+/// What an actor builds and a transport reads, unchecked: nothing here
+/// trusts it. [`ValidBatch::new`] checks it once, and a [`ValidBatch`] is
+/// what receivers keep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TransitionBatch {
     /// What each observation is.
     pub spec: ObservationSpec,
     /// Size of the action set; every action is below it.
     pub num_actions: u32,
-    /// Action taken, per transition.
-    pub actions: Vec<u32>,
-    /// Discounted reward, per transition.
-    pub rewards: Vec<f32>,
-    /// Bootstrap discount gamma^k (0 when terminal), per transition.
-    pub discounts: Vec<f32>,
-    /// Initial priority, per transition.
-    pub priorities: Vec<f32>,
+    /// The transitions; the index columns refer to `observations`.
+    pub columns: Columns,
     /// The observations, each once.
     pub observations: ObservationPool,
-    /// Pool index of each transition's state.
-    pub observation_index: Vec<u32>,
-    /// Pool index of each transition's next state.
-    pub next_observation_index: Vec<u32>,
 }
 
 impl TransitionBatch {
@@ -204,13 +202,8 @@ impl TransitionBatch {
         Self {
             spec,
             num_actions,
-            actions: Vec::new(),
-            rewards: Vec::new(),
-            discounts: Vec::new(),
-            priorities: Vec::new(),
+            columns: Columns::default(),
             observations: ObservationPool::new(encoding),
-            observation_index: Vec::new(),
-            next_observation_index: Vec::new(),
         }
     }
 
@@ -222,41 +215,30 @@ impl TransitionBatch {
 
     /// Adds a transition.
     pub fn push(&mut self, t: Transition) {
-        self.actions.push(t.action);
-        self.rewards.push(t.reward);
-        self.discounts.push(t.discount);
-        self.priorities.push(t.priority);
-        self.observation_index.push(t.observation);
-        self.next_observation_index.push(t.next_observation);
+        self.columns.push(t);
     }
 
     /// Number of transitions.
     pub fn len(&self) -> usize {
-        self.actions.len()
+        self.columns.len()
     }
 
     /// Whether the batch has no transitions.
     pub fn is_empty(&self) -> bool {
-        self.actions.is_empty()
+        self.columns.is_empty()
     }
 
     /// Transition `i`, if there is one.
     pub fn transition(&self, i: usize) -> Option<Transition> {
-        Some(Transition {
-            observation: *self.observation_index.get(i)?,
-            action: *self.actions.get(i)?,
-            reward: *self.rewards.get(i)?,
-            discount: *self.discounts.get(i)?,
-            priority: *self.priorities.get(i)?,
-            next_observation: *self.next_observation_index.get(i)?,
-        })
+        self.columns.get(i)
     }
 
     /// Checks everything a receiver relies on: a known spec, equal column
     /// lengths, finite rewards, discounts in [0, 1], finite non-negative
     /// priorities, actions below `num_actions`, pool indices in range and
     /// every observation entry valid for the spec's length. The first
-    /// problem found is returned, naming its field.
+    /// problem found is returned, naming its field. [`ValidBatch::new`] is
+    /// this check with a type for its success.
     pub fn validate(&self) -> Result<(), BatchError> {
         let obs_len = self.spec.num_values().ok_or_else(|| {
             BatchError::new(
@@ -282,30 +264,16 @@ impl TransitionBatch {
                 "must be at least 1",
             ));
         }
-        let n = self.len();
-        if n == 0 {
+        let c = &self.columns;
+        if c.is_empty() {
             return Err(BatchError::new(
                 RejectReason::EmptyBatch,
                 "actions",
                 "the batch has no transitions",
             ));
         }
-        for (field, len) in [
-            ("rewards", self.rewards.len()),
-            ("discounts", self.discounts.len()),
-            ("priorities", self.priorities.len()),
-            ("observation_index", self.observation_index.len()),
-            ("next_observation_index", self.next_observation_index.len()),
-        ] {
-            if len != n {
-                return Err(BatchError::new(
-                    RejectReason::LengthMismatch,
-                    field,
-                    format!("has {len} entries, but there are {n} actions"),
-                ));
-            }
-        }
-        for (i, a) in self.actions.iter().enumerate() {
+        c.check_lengths()?;
+        for (i, a) in c.actions.iter().enumerate() {
             if *a >= self.num_actions {
                 return Err(BatchError::new(
                     RejectReason::ActionRange,
@@ -314,7 +282,7 @@ impl TransitionBatch {
                 ));
             }
         }
-        for (i, r) in self.rewards.iter().enumerate() {
+        for (i, r) in c.rewards.iter().enumerate() {
             if !r.is_finite() {
                 return Err(BatchError::new(
                     RejectReason::NonFiniteReward,
@@ -323,7 +291,7 @@ impl TransitionBatch {
                 ));
             }
         }
-        for (i, d) in self.discounts.iter().enumerate() {
+        for (i, d) in c.discounts.iter().enumerate() {
             if !(0.0..=1.0).contains(d) {
                 return Err(BatchError::new(
                     RejectReason::Discount,
@@ -332,15 +300,11 @@ impl TransitionBatch {
                 ));
             }
         }
-        for (i, p) in self.priorities.iter().enumerate() {
-            check_priority(*p).map_err(|(reason, problem)| {
-                BatchError::new(reason, format!("priorities[{i}]"), problem)
-            })?;
-        }
+        check_priorities(&c.priorities, |i| format!("priorities[{i}]"))?;
         let pool = &self.observations;
         for (field, indices) in [
-            ("observation_index", &self.observation_index),
-            ("next_observation_index", &self.next_observation_index),
+            ("observation_index", &c.observation_index),
+            ("next_observation_index", &c.next_observation_index),
         ] {
             for (i, idx) in indices.iter().enumerate() {
                 if *idx as usize >= pool.len() {
@@ -394,18 +358,64 @@ impl TransitionBatch {
     }
 }
 
-/// Checks one priority: finite and >= 0.
-pub fn check_priority(p: f32) -> Result<(), (RejectReason, String)> {
-    if !p.is_finite() {
-        Err((
-            RejectReason::NonFinitePriority,
-            format!("{p} is not finite"),
-        ))
-    } else if p < 0.0 {
-        Err((RejectReason::NegativePriority, format!("{p} is negative")))
-    } else {
-        Ok(())
+/// A [`TransitionBatch`] that passed [`TransitionBatch::validate`]. Made
+/// only by [`ValidBatch::new`] (or `TryFrom`) and read-only after (it
+/// dereferences to the batch), so whoever holds one never checks it again:
+/// a batch is checked once where it enters a process, and passed on as
+/// this type.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidBatch(TransitionBatch);
+
+impl ValidBatch {
+    /// `batch`, if it validates; otherwise the first problem, naming its
+    /// field.
+    pub fn new(batch: TransitionBatch) -> Result<Self, BatchError> {
+        batch.validate()?;
+        Ok(Self(batch))
     }
+
+    /// The batch, to change or take apart (it is no longer known valid).
+    pub fn into_inner(self) -> TransitionBatch {
+        self.0
+    }
+}
+
+impl std::ops::Deref for ValidBatch {
+    type Target = TransitionBatch;
+
+    fn deref(&self) -> &TransitionBatch {
+        &self.0
+    }
+}
+
+impl TryFrom<TransitionBatch> for ValidBatch {
+    type Error = BatchError;
+
+    fn try_from(batch: TransitionBatch) -> Result<Self, BatchError> {
+        Self::new(batch)
+    }
+}
+
+/// Checks priorities: each finite and >= 0. The error names the first bad
+/// one as `field(i)` says (e.g. `priorities[3]`).
+pub fn check_priorities(
+    priorities: &[f32],
+    field: impl Fn(usize) -> String,
+) -> Result<(), BatchError> {
+    for (i, p) in priorities.iter().enumerate() {
+        let problem = if !p.is_finite() {
+            (
+                RejectReason::NonFinitePriority,
+                format!("{p} is not finite"),
+            )
+        } else if *p < 0.0 {
+            (RejectReason::NegativePriority, format!("{p} is negative"))
+        } else {
+            continue;
+        };
+        return Err(BatchError::new(problem.0, field(i), problem.1));
+    }
+    Ok(())
 }
 
 /// Why an input was rejected; the label of the rejection counters.
@@ -525,6 +535,7 @@ impl BatchError {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::codec::ObservationEncoding::DenseF32;
 
     fn batch() -> TransitionBatch {
         let mut b = TransitionBatch::new(
@@ -548,71 +559,72 @@ mod tests {
     #[test]
     fn a_good_batch_validates() {
         assert_eq!(batch().validate(), Ok(()));
+        assert_eq!(
+            ValidBatch::new(batch()).map(ValidBatch::into_inner),
+            Ok(batch())
+        );
+    }
+
+    fn rejects(mutate: impl FnOnce(&mut TransitionBatch), reason: RejectReason, field: &str) {
+        let mut b = batch();
+        mutate(&mut b);
+        let err = ValidBatch::new(b).expect_err(field);
+        assert_eq!((err.reason, err.field.as_str()), (reason, field), "{err}");
     }
 
     #[test]
     fn each_problem_names_its_field() {
-        type Mutation = fn(&mut TransitionBatch);
-        let cases: Vec<(Mutation, RejectReason, &str)> = vec![
+        use RejectReason::*;
+        // Each bad value as a change to transition 0.
+        let rows: [(fn(&mut Transition), RejectReason, &str); 6] = [
+            (|t| t.action = 4, ActionRange, "actions[0]"),
+            (|t| t.reward = f32::NAN, NonFiniteReward, "rewards[0]"),
+            (|t| t.discount = 1.5, Discount, "discounts[0]"),
+            (|t| t.priority = -1.0, NegativePriority, "priorities[0]"),
             (
-                |b| b.actions[0] = 4,
-                RejectReason::ActionRange,
-                "actions[0]",
-            ),
-            (
-                |b| b.rewards[0] = f32::NAN,
-                RejectReason::NonFiniteReward,
-                "rewards[0]",
-            ),
-            (
-                |b| b.discounts[0] = 1.5,
-                RejectReason::Discount,
-                "discounts[0]",
-            ),
-            (
-                |b| b.priorities[0] = -1.0,
-                RejectReason::NegativePriority,
+                |t| t.priority = f32::INFINITY,
+                NonFinitePriority,
                 "priorities[0]",
             ),
             (
-                |b| b.priorities[0] = f32::INFINITY,
-                RejectReason::NonFinitePriority,
-                "priorities[0]",
-            ),
-            (
-                |b| b.next_observation_index[0] = 2,
-                RejectReason::IndexRange,
+                |t| t.next_observation = 2,
+                IndexRange,
                 "next_observation_index[0]",
             ),
-            (
-                |b| b.rewards.push(0.0),
-                RejectReason::LengthMismatch,
-                "rewards",
-            ),
-            (
-                |b| b.spec.shape = vec![2, 2],
-                RejectReason::ObservationEncoding,
-                "observations[0]",
-            ),
-            (
-                |b| {
-                    b.observations = ObservationPool::from_parts(
-                        ObservationEncoding::DenseF32,
-                        vec![0, 24],
-                        vec![0; 44],
-                    )
-                },
-                RejectReason::ObservationLength,
-                "observations[1]",
-            ),
-            (|b| b.spec.shape = vec![], RejectReason::Spec, "spec.shape"),
         ];
-        for (mutate, reason, field) in cases {
-            let mut b = batch();
-            mutate(&mut b);
-            let err = b.validate().expect_err(field);
-            assert_eq!((err.reason, err.field.as_str()), (reason, field), "{err}");
+        for (change, reason, field) in rows {
+            let set_row = |b: &mut TransitionBatch| {
+                let mut t = b.transition(0).expect("one transition");
+                change(&mut t);
+                b.columns.set(0, t);
+            };
+            rejects(set_row, reason, field);
         }
+        rejects(|b| b.columns.rewards.push(0.0), LengthMismatch, "rewards");
+        rejects(
+            |b| b.spec.shape = vec![2, 2],
+            ObservationEncoding,
+            "observations[0]",
+        );
+        let dense_short = |b: &mut TransitionBatch| {
+            let data = vec![0; 44];
+            b.observations = ObservationPool::from_parts(DenseF32, vec![0, 24], data);
+        };
+        rejects(dense_short, ObservationLength, "observations[1]");
+        rejects(|b| b.spec.shape = vec![], Spec, "spec.shape");
+    }
+
+    #[test]
+    fn priorities_are_finite_and_not_negative() {
+        let field = |i| format!("p[{i}]");
+        assert_eq!(check_priorities(&[0.0, 2.5], field), Ok(()));
+        let err = check_priorities(&[1.0, f32::NAN, -1.0], field).expect_err("NaN");
+        assert_eq!(err.to_string(), "p[1]: NaN is not finite");
+        let err = check_priorities(&[-0.5], field).expect_err("negative");
+        assert_eq!(
+            (err.reason, err.problem.as_str()),
+            (RejectReason::NegativePriority, "-0.5 is negative")
+        );
     }
 
     #[test]

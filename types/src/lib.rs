@@ -3,7 +3,12 @@
 //!
 //! - [`batch`]: the [`TransitionBatch`] (struct-of-arrays n-step
 //!   transitions over an [`ObservationPool`] that holds each observation
-//!   once) and its validation, whose [`BatchError`] names the field.
+//!   once) and its validation, whose [`BatchError`] names the field; a
+//!   [`ValidBatch`] is a batch that passed it.
+//! - [`columns`]: [`Columns`], the six per-transition columns, written once
+//!   for batches, replay tables, their snapshots and samples.
+//! - [`sample`]: what a replay table answers ([`Sample`],
+//!   [`PrioritiesUpdated`]), for the server and its clients alike.
 //! - [`codec`]: the observation codec (dense f32 or sparse cells), the same
 //!   bytes on gRPC and in shared memory.
 //! - [`spec`]: what a Q-network is ([`NetworkSpec`]: the
@@ -22,13 +27,18 @@
 pub mod batch;
 pub mod checkpoint;
 pub mod codec;
+pub mod columns;
+pub mod sample;
 pub mod spec;
 pub mod weights;
 
 pub use batch::{
     BatchError, ObservationPool, ObservationSpec, RejectReason, Transition, TransitionBatch,
+    ValidBatch,
 };
 pub use codec::ObservationEncoding;
+pub use columns::Columns;
+pub use sample::{PrioritiesUpdated, Sample};
 pub use spec::{
     EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
 };

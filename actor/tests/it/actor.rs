@@ -20,11 +20,18 @@ fn training_fills_valid_batches_with_one_forward_pass_per_step() {
         assert_eq!(b.num_actions, 5);
         assert_eq!(b.spec.kind, "ttg");
         assert!(b.observations.len() < 2 * b.len(), "observations shared");
-        assert!(b.discounts.iter().all(|d| *d == 0.0 || *d <= 0.99));
-        assert!(b.priorities.iter().all(|p| p.is_finite() && *p >= 0.0));
+        assert!(b.columns.discounts.iter().all(|d| *d == 0.0 || *d <= 0.99));
+        assert!(
+            b.columns
+                .priorities
+                .iter()
+                .all(|p| p.is_finite() && *p >= 0.0)
+        );
     }
     assert!(
-        out.iter().flat_map(|b| &b.discounts).any(|d| *d == 0.0),
+        out.iter()
+            .flat_map(|b| &b.columns.discounts)
+            .any(|d| *d == 0.0),
         "episode ends are terminal"
     );
     // A single actor's 4 environments are the 4 rungs of the ladder; the
@@ -247,7 +254,7 @@ fn the_q_network_drives_actors_of_every_kind() {
         b.validate().expect("valid batch");
         assert_eq!(b.spec.kind, kind);
         assert_eq!(b.num_actions as i64, net.spec().num_actions);
-        assert!(b.priorities.iter().all(|p| p.is_finite()), "{kind}");
+        assert!(b.columns.priorities.iter().all(|p| p.is_finite()), "{kind}");
     }
 }
 

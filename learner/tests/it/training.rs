@@ -276,7 +276,7 @@ fn a_batch_of_another_network_is_refused_naming_the_mismatch() {
     let err = TrainingBatch::from_batch(&b, &[1.0], vec![0], &spec).unwrap_err();
     assert!(err.to_string().contains("5 actions"), "{err}");
     b.num_actions = 2;
-    b.rewards[0] = f32::NAN;
+    b.columns.rewards[0] = f32::NAN;
     let err = TrainingBatch::from_batch(&b, &[1.0], vec![0], &spec).unwrap_err();
     assert!(err.to_string().contains("rewards[0]"), "{err}");
 }

@@ -69,7 +69,7 @@ async fn insert_sample_update_info_round_trip_on_port_0() {
         .expect("sample");
     assert_eq!((s.keys.len(), s.weights.len(), s.batch.len()), (16, 16, 16));
     assert!(s.weights.iter().all(|w| *w > 0.0 && *w <= 1.0));
-    for (k, r) in s.keys.iter().zip(&s.batch.rewards) {
+    for (k, r) in s.keys.iter().zip(&s.batch.columns.rewards) {
         assert_eq!(*k as f32, *r, "key names the item");
     }
     let u = c
@@ -144,28 +144,28 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
         ),
         (
             "NaN reward",
-            |b| b.rewards[2] = f32::NAN,
+            |b| b.columns.rewards[2] = f32::NAN,
             tonic::Code::InvalidArgument,
             "batch.rewards[2]",
             RejectReason::NonFiniteReward,
         ),
         (
             "infinite reward",
-            |b| b.rewards[0] = f32::NEG_INFINITY,
+            |b| b.columns.rewards[0] = f32::NEG_INFINITY,
             tonic::Code::InvalidArgument,
             "batch.rewards[0]",
             RejectReason::NonFiniteReward,
         ),
         (
             "infinite priority",
-            |b| b.priorities[1] = f32::INFINITY,
+            |b| b.columns.priorities[1] = f32::INFINITY,
             tonic::Code::InvalidArgument,
             "batch.priorities[1]",
             RejectReason::NonFinitePriority,
         ),
         (
             "negative priority",
-            |b| b.priorities[3] = -0.5,
+            |b| b.columns.priorities[3] = -0.5,
             tonic::Code::InvalidArgument,
             "batch.priorities[3]",
             RejectReason::NegativePriority,
@@ -195,21 +195,21 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
         ),
         (
             "action out of range",
-            |b| b.actions[1] = 4,
+            |b| b.columns.actions[1] = 4,
             tonic::Code::InvalidArgument,
             "batch.actions[1]",
             RejectReason::ActionRange,
         ),
         (
             "discount above 1",
-            |b| b.discounts[0] = 1.5,
+            |b| b.columns.discounts[0] = 1.5,
             tonic::Code::InvalidArgument,
             "batch.discounts[0]",
             RejectReason::Discount,
         ),
         (
             "observation index out of the pool",
-            |b| b.next_observation_index[0] = 99,
+            |b| b.columns.next_observation_index[0] = 99,
             tonic::Code::InvalidArgument,
             "batch.next_observation_index[0]",
             RejectReason::IndexRange,
@@ -217,7 +217,7 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
         (
             "columns of different lengths",
             |b| {
-                b.rewards.pop();
+                b.columns.rewards.pop();
             },
             tonic::Code::InvalidArgument,
             "batch.rewards",

@@ -7,7 +7,9 @@ use crossroads_common::Shutdown;
 use crossroads_config::TransportConfig;
 use crossroads_transport::shm::{ShmBatchPublisher, ShmError};
 
-use crate::util::{SPEC_LEN, batch, obs, server_config, unique_prefix};
+use crossroads_types::ValidBatch;
+
+use crate::util::{SPEC_LEN, batch, obs, server_config, unique_prefix, valid};
 
 const CHILD_PREFIX: &str = "CROSSROADS_TEST_SHM_PREFIX";
 
@@ -38,7 +40,7 @@ fn publisher_child() {
     }
     for b in 0..5u32 {
         publisher
-            .send(u64::from(b), &batch(b * 10, 10, None))
+            .send(u64::from(b), &valid(b * 10, 10, None))
             .expect("send");
     }
     let acks = publisher
@@ -57,6 +59,7 @@ fn publisher_child() {
     // its rejection, not silently dropped.
     let mut other = batch(50, 10, None);
     other.spec.kind = "other".to_owned();
+    let other = ValidBatch::new(other).expect("valid, only not the table's");
     publisher.send(5, &other).expect("send");
     let acks = publisher.flush(Duration::from_secs(20)).expect("answered");
     assert_eq!(acks.len(), 1);
@@ -117,14 +120,17 @@ async fn batches_from_another_process_land_in_the_table() {
     }
     let image = table.image();
     let tags: Vec<f32> = (0..50).map(|t| t as f32).collect();
-    assert_eq!(image.rewards, tags, "every batch, in order, nothing twice");
+    assert_eq!(
+        image.items.rewards, tags,
+        "every batch, in order, nothing twice"
+    );
     let s = table
         .sample(20, 0.4, Duration::from_secs(1), &shutdown)
         .await
         .expect("sample");
     let mut values = vec![0.0; SPEC_LEN];
     for i in 0..s.batch.len() {
-        let tag = s.batch.rewards[i] as u32;
+        let tag = s.batch.columns.rewards[i] as u32;
         let tr = s.batch.transition(i).expect("in range");
         s.batch
             .observations
@@ -146,13 +152,14 @@ fn a_publisher_without_a_server_fails_fast() {
     assert_eq!(publisher.subscribers(), 0);
     let start = Instant::now();
     let err = publisher
-        .send(0, &batch(0, 3, None))
+        .send(0, &valid(0, 3, None))
         .expect_err("nobody listens");
     assert!(matches!(err, ShmError::NoSubscriber { .. }), "{err:?}");
     assert!(start.elapsed() < Duration::from_secs(2));
+    // An invalid batch cannot be sent: it never becomes a `ValidBatch`.
     let mut bad = batch(0, 3, None);
-    bad.rewards[1] = f32::NAN;
-    let err = publisher.send(1, &bad).expect_err("invalid");
+    bad.columns.rewards[1] = f32::NAN;
+    let err = ValidBatch::new(bad).expect_err("invalid");
     assert!(err.to_string().contains("rewards[1]"), "{err}");
     assert_eq!(publisher.in_flight().count(), 0);
     assert!(
@@ -181,11 +188,11 @@ fn a_full_queue_fails_the_send_after_its_timeout_instead_of_hanging() {
     let mut publisher = ShmBatchPublisher::new(&config, "t").expect("publisher");
     // It connects (as a polling server does), then reads nothing.
     assert!(!stuck.has_samples().expect("connected"));
-    publisher.send(0, &batch(0, 2, None)).expect("queued");
-    publisher.send(1, &batch(2, 2, None)).expect("queued");
+    publisher.send(0, &valid(0, 2, None)).expect("queued");
+    publisher.send(1, &valid(2, 2, None)).expect("queued");
     let start = Instant::now();
     let err = publisher
-        .send(2, &batch(4, 2, None))
+        .send(2, &valid(4, 2, None))
         .expect_err("queue full");
     let waited = start.elapsed();
     assert!(

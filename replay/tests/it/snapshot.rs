@@ -86,7 +86,10 @@ async fn round_trip_restores_items_keys_priorities_and_counters() {
     // A smaller table keeps the newest items.
     let small = table(20, 0.6);
     assert_eq!(small.restore(image).expect("fits"), 30);
-    assert_eq!(small.image().rewards, image.rewards[30..].to_vec());
+    assert_eq!(
+        small.image().items.rewards,
+        image.items.rewards[30..].to_vec()
+    );
 }
 
 #[tokio::test]

@@ -7,11 +7,11 @@ use std::time::Duration;
 use crossroads_common::Shutdown;
 use crossroads_config::WeightNormalization;
 use crossroads_replay::{PreparedBatch, Table, TableError, TableMetrics};
-use crossroads_types::RejectReason;
+use crossroads_types::{RejectReason, Sample, TransitionBatch, ValidBatch};
 
 use crate::util::{self, insert, obs, prepared, table};
 
-async fn sample(t: &Table, n: usize, beta: f64) -> crossroads_replay::Sample {
+async fn sample(t: &Table, n: usize, beta: f64) -> Sample<TransitionBatch> {
     t.sample(n, beta, Duration::from_secs(5), &Shutdown::new())
         .await
         .expect("sample")
@@ -93,7 +93,7 @@ async fn importance_weights_match_hand_computed_values() {
         );
     }
     assert!(seen.iter().all(|s| *s), "every item drawn in 400 samples");
-    assert_eq!(s.priorities.len(), 400);
+    assert_eq!(s.batch.columns.priorities.len(), 400);
 
     // beta 0: no correction.
     let s = sample(&t, 50, 0.0).await;
@@ -108,11 +108,13 @@ async fn importance_weights_match_hand_computed_values() {
     for _ in 0..20 {
         let s = sample(&t, 3, 1.0).await;
         let min_leaf = s
+            .batch
+            .columns
             .priorities
             .iter()
             .map(|p| f64::from(*p).sqrt())
             .fold(f64::INFINITY, f64::min);
-        for (p, w) in s.priorities.iter().zip(&s.weights) {
+        for (p, w) in s.batch.columns.priorities.iter().zip(&s.weights) {
             let want = (min_leaf / f64::from(*p).sqrt()) as f32;
             assert!((w - want).abs() < 1e-6, "{w} vs {want}");
         }
@@ -130,7 +132,7 @@ async fn eviction_is_first_in_first_out_and_updates_for_evicted_keys_are_ignored
     assert_eq!((stats.size, stats.inserts_total, stats.next_key), (5, 8, 8));
     let image = t.image();
     assert_eq!(
-        image.rewards,
+        image.items.rewards,
         vec![3.0, 4.0, 5.0, 6.0, 7.0],
         "oldest evicted first"
     );
@@ -146,7 +148,7 @@ async fn eviction_is_first_in_first_out_and_updates_for_evicted_keys_are_ignored
         (stats.priority_updates_total, stats.ignored_updates_total),
         (2, 3)
     );
-    assert_eq!(t.image().priorities, vec![1.0, 1.0, 5.0, 1.0, 0.0]);
+    assert_eq!(t.image().items.priorities, vec![1.0, 1.0, 5.0, 1.0, 0.0]);
 
     // A zero priority is floored, not unsampleable forever; but key 7 (now
     // at the floor) is drawn far less than key 5.
@@ -165,10 +167,10 @@ async fn sampled_items_are_what_was_inserted() {
     s.batch.validate().expect("a valid batch");
     let mut values = vec![0.0; util::SPEC_LEN];
     for i in 0..s.batch.len() {
-        let tag = s.batch.rewards[i] as u32;
+        let tag = s.batch.columns.rewards[i] as u32;
         assert_eq!(s.keys[i], u64::from(tag), "key = insertion order");
-        assert_eq!(s.batch.actions[i], tag % 4);
-        assert_eq!(s.batch.discounts[i], 0.9);
+        assert_eq!(s.batch.columns.actions[i], tag % 4);
+        assert_eq!(s.batch.columns.discounts[i], 0.9);
         let tr = s.batch.transition(i).expect("in range");
         s.batch
             .observations
@@ -221,7 +223,7 @@ async fn a_batch_of_another_spec_is_rejected_and_changes_nothing() {
     other.spec.kind = "sequential".to_owned();
     let err = t
         .insert(
-            &PreparedBatch::new(other).expect("valid alone"),
+            &PreparedBatch::new(ValidBatch::new(other).expect("valid alone")),
             Duration::from_secs(1),
             &Shutdown::new(),
         )

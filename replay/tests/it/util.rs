@@ -7,7 +7,9 @@ use crossroads_config::Config;
 use crossroads_config::WeightNormalization;
 use crossroads_replay::rate_limiter::RateLimiterConfig;
 use crossroads_replay::{PreparedBatch, Table, TableConfig, TableMetrics};
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{
+    ObservationEncoding, ObservationSpec, Transition, TransitionBatch, ValidBatch,
+};
 
 pub const SPEC_LEN: usize = 2 * 3 * 2;
 
@@ -69,8 +71,13 @@ pub fn batch(first: u32, n: u32, priorities: Option<&[f32]>) -> TransitionBatch 
     b
 }
 
+/// [`batch`], validated.
+pub fn valid(first: u32, n: u32, priorities: Option<&[f32]>) -> ValidBatch {
+    ValidBatch::new(batch(first, n, priorities)).expect("valid batch")
+}
+
 pub fn prepared(first: u32, n: u32, priorities: Option<&[f32]>) -> PreparedBatch {
-    PreparedBatch::new(batch(first, n, priorities)).expect("valid batch")
+    PreparedBatch::new(valid(first, n, priorities))
 }
 
 pub async fn insert(t: &Table, first: u32, n: u32, priorities: Option<&[f32]>) {

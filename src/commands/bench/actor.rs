@@ -229,7 +229,7 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
             while let Some(batch) = actor.take_batch() {
                 match &sink {
                     Sink::Table(t) => {
-                        t.insert_now(&PreparedBatch::new(batch)?)?;
+                        t.insert_now(&PreparedBatch::try_from(batch)?)?;
                     }
                     Sink::Pusher(p) => p.push(batch),
                 }
