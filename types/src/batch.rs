@@ -576,7 +576,8 @@ mod tests {
     fn each_problem_names_its_field() {
         use RejectReason::*;
         // Each bad value as a change to transition 0.
-        let rows: [(fn(&mut Transition), RejectReason, &str); 6] = [
+        type Change = fn(&mut Transition);
+        let rows: [(Change, RejectReason, &str); 6] = [
             (|t| t.action = 4, ActionRange, "actions[0]"),
             (|t| t.reward = f32::NAN, NonFiniteReward, "rewards[0]"),
             (|t| t.discount = 1.5, Discount, "discounts[0]"),

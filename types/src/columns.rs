@@ -165,7 +165,7 @@ impl Columns {
     /// Reads what [`write_le`](Self::write_le) wrote; `None` unless
     /// `bytes` is a whole number of rows.
     pub fn read_le(bytes: &[u8]) -> Option<Self> {
-        if bytes.len() % ROW_BYTES != 0 {
+        if !bytes.len().is_multiple_of(ROW_BYTES) {
             return None;
         }
         let n = bytes.len() / ROW_BYTES;
