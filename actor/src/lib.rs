@@ -18,7 +18,8 @@
 //! [`EpisodeStats`] sums episode ends for evaluation reports;
 //! [`ActorMetrics`] are the `crossroads_actor_*` metrics. A
 //! [`WeightsSubscription`] receives the learner's weights (gRPC stream or
-//! iceoryx2) into a [`WeightsSlot`]; a [`LiveNetwork`] applies the newest
+//! iceoryx2) into a `crossroads_transport::WeightsSlot`; a [`LiveNetwork`]
+//! applies the newest
 //! between steps. Configuration:
 //! the `[actor]` section ([`crossroads_config::ActorConfig`]) through
 //! [`ActorSettings::from_config`] and [`resolve_index`].
@@ -49,4 +50,4 @@ pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};
 pub use vec_env::{EnvStep, EpisodeEnd, VecEnv, batch_spec};
-pub use weights::{LiveNetwork, WeightsSlot, WeightsSubscription, WeightsUpdate};
+pub use weights::{LiveNetwork, WeightsSubscription};

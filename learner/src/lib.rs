@@ -9,9 +9,10 @@
 //! `no_grad`, importance-weighted Huber loss, [`Optimizer`] step with
 //! gradient clipping, target-network update), hands the new priorities to
 //! [`sampler::spawn_priority_sender`], and on its schedules publishes the
-//! weights (a monotonic version; [`broadcast::WeightsHub`] for the gRPC
-//! stream, `crossroads_transport::weights_shm::ShmWeightsPublisher` for
-//! actors on this host) and writes checkpoints ([`CheckpointStore`]:
+//! weights (a monotonic version, into a
+//! `crossroads_transport::WeightsSlot` that the gRPC stream reads, and
+//! `crossroads_transport::weights_shm::ShmWeightsPublisher` for actors on
+//! this host) and writes checkpoints ([`CheckpointStore`]:
 //! safetensors weights, target network and optimizer state plus a JSON
 //! manifest, written atomically). The tonic service
 //! ([`service::LearnerService`]) serves weights, checkpoints and status;
@@ -25,7 +26,6 @@
 
 pub mod batch;
 pub mod bench;
-pub mod broadcast;
 pub mod checkpoint;
 mod error;
 pub mod metrics;

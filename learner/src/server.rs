@@ -16,6 +16,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use crossroads_config::Config;
 use crossroads_common::{Backoff, Shutdown};
 use crossroads_proto::v1::learner_server::LearnerServer;
+use crossroads_transport::WeightsSlot;
 use crossroads_transport::grpc::ReplayClient;
 use parking_lot::Mutex;
 use prometheus::Registry;
@@ -25,7 +26,6 @@ use tokio::task::JoinHandle;
 use tokio_stream::wrappers::TcpListenerStream;
 
 use crate::LearnerError;
-use crate::broadcast::WeightsHub;
 use crate::checkpoint::CheckpointStore;
 use crate::metrics::LearnerMetrics;
 use crate::sampler::{BetaSchedule, PrefetchConfig, spawn_prefetch, spawn_priority_sender};
@@ -107,7 +107,7 @@ pub async fn start(
     let stop = shutdown.child();
     let (commands_tx, commands_rx) = mpsc::channel(16);
     let shared = Arc::new(Shared {
-        hub: WeightsHub::new(),
+        weights: WeightsSlot::new(),
         store,
         status: Mutex::new(StatusView::default()),
         commands: commands_tx,

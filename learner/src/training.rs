@@ -10,15 +10,15 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_config::Config;
 use crossroads_common::Shutdown;
-use crossroads_transport::convert::PublishedWeights;
+use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
+use crossroads_types::Weights;
 use parking_lot::Mutex;
 use tokio::runtime::Handle;
 use tokio::sync::{mpsc, oneshot};
 
 use crate::LearnerError;
 use crate::batch::TrainingBatch;
-use crate::broadcast::WeightsHub;
 use crate::checkpoint::{CheckpointEntry, CheckpointStore, NewCheckpoint};
 use crate::metrics::LearnerMetrics;
 use crate::sampler::{Prefetched, PriorityUpdate};
@@ -69,8 +69,9 @@ pub struct StatusView {
 /// State shared by the training thread and the gRPC service.
 #[derive(Debug)]
 pub struct Shared {
-    /// Latest weights.
-    pub hub: WeightsHub,
+    /// The latest published weights, for the gRPC stream and
+    /// `GetLatestWeights`.
+    pub weights: WeightsSlot,
     /// Checkpoints, when enabled.
     pub store: Option<Arc<CheckpointStore>>,
     /// Training progress.
@@ -353,20 +354,19 @@ impl Learner {
     /// Publishes the online network under the next version.
     pub fn publish(&mut self) -> Result<(), LearnerError> {
         let version = self.version + 1;
-        let bytes = self.trainer.online().to_safetensors(version)?;
-        let published_unix_ms = now_ms();
+        let weights = Weights {
+            version,
+            update_step: self.trainer.step(),
+            published_unix_ms: now_ms(),
+            spec: self.trainer.online().spec().clone(),
+            safetensors: self.trainer.online().to_safetensors(version)?,
+        };
         if let Some(shm) = &mut self.shm
-            && let Err(e) = shm.publish(version, self.trainer.step(), published_unix_ms, &bytes)
+            && let Err(e) = shm.publish(&weights)
         {
             tracing::warn!(error = %e, "publishing weights over shared memory");
         }
-        self.shared.hub.publish(PublishedWeights {
-            version,
-            update_step: self.trainer.step(),
-            spec: self.trainer.online().spec().clone(),
-            safetensors: bytes,
-            published_unix_ms,
-        });
+        self.shared.weights.offer(weights);
         self.version = version;
         self.shared.metrics.weights_version.set(version as i64);
         self.shared.metrics.weights_published.inc();

@@ -5,9 +5,10 @@ use std::time::Duration;
 
 use anyhow::Context;
 use crossroads_actor::{
-    Actor, ActorMetrics, ActorSettings, LiveNetwork, Mode, PushConfig, Pusher, WeightsSlot,
+    Actor, ActorMetrics, ActorSettings, LiveNetwork, Mode, PushConfig, Pusher,
     WeightsSubscription, resolve_index,
 };
+use crossroads_transport::WeightsSlot;
 use crossroads_config::Config;
 use crossroads_model::QNetwork;
 
