@@ -19,9 +19,11 @@
 //! [`ActorMetrics`] are the `crossroads_actor_*` metrics. A
 //! [`WeightsSubscription`] receives the learner's weights (gRPC stream or
 //! iceoryx2) into a `crossroads_transport::WeightsSlot`; a [`LiveNetwork`]
-//! applies the newest
-//! between steps. Configuration:
-//! the `[actor]` section ([`crossroads_config::ActorConfig`]) through
+//! applies the newest between steps. [`start`] / [`run`] put it all
+//! together for one actor process under one shutdown signal
+//! ([`ActorParts`] is the actor it assembles, for benches).
+//! Configuration: the `[actor]` section
+//! ([`crossroads_config::ActorConfig`]) through
 //! [`ActorSettings::from_config`] and [`resolve_index`].
 
 mod actor;
@@ -30,6 +32,7 @@ mod error;
 mod exploration;
 mod metrics;
 mod nstep;
+mod process;
 mod push;
 mod stats;
 mod values;
@@ -45,6 +48,9 @@ pub use exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode, epsilon_ladder};
 pub use metrics::ActorMetrics;
 pub use nstep::{
     BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,
+};
+pub use process::{
+    ActorParts, DRAIN, RunningActor, run, start, start_with_max_steps,
 };
 pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;

@@ -28,7 +28,8 @@ use crate::values::{ActionValues, ValuesError};
 
 /// A Q-network that applies the newest version in its [`WeightsSlot`] at
 /// the start of each [`ActionValues::q_values`] call, and reports the
-/// version in use and its age to [`ActorMetrics`].
+/// version in use and its age, and each forward pass and its time, to
+/// [`ActorMetrics`].
 ///
 /// Weights of another architecture with the same input length and action
 /// count replace the network; weights that cannot drive these environments
@@ -147,17 +148,16 @@ impl ActionValues for LiveNetwork {
         ActionValues::num_actions(&self.net)
     }
 
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError> {
+    fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError> {
         self.refresh().map_err(|e| match e {
             ActorError::Values(message) => ValuesError::from(message),
             other => Box::new(other),
         })?;
-        ActionValues::q_values(&mut self.net, observations, n, out)
+        let started = Instant::now();
+        let result = ActionValues::q_values(&mut self.net, obs, n, out);
+        self.metrics
+            .forward_pass(started.elapsed().as_secs_f64());
+        result
     }
 }
 

@@ -43,4 +43,4 @@ pub use error::LearnerError;
 pub use metrics::LearnerMetrics;
 pub use optimizer::{Optimizer, OptimizerConfig};
 pub use server::{RunningLearner, run, start};
-pub use trainer::{Trainer, TrainerConfig, UpdateStats, network_spec};
+pub use trainer::{Trainer, TrainerConfig, UpdateStats};

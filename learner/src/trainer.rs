@@ -1,8 +1,8 @@
 //! [`Trainer`]: the online and target networks and the optimizer, and
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
 
-use crossroads_config::{LearnerConfig, TargetUpdate, Trunk};
-use crossroads_model::{ModelError, NetworkSpec, QNetwork, TrunkKind};
+use crossroads_config::{LearnerConfig, TargetUpdate};
+use crossroads_model::{NetworkSpec, QNetwork, network_spec};
 use tch::{Kind, Tensor};
 
 use crate::LearnerError;
@@ -48,22 +48,6 @@ impl TrainerConfig {
             priority_eps: c.priority_eps,
         })
     }
-}
-
-/// The network `[learner]` describes (observation, action set, trunk,
-/// hidden sizes); actors build their first network from it too.
-pub fn network_spec(c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
-    let trunk = match c.trunk {
-        Trunk::Mlp => TrunkKind::Mlp,
-        Trunk::Conv => TrunkKind::Conv,
-    };
-    let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
-    Ok(NetworkSpec::new(
-        &c.observation,
-        &c.action_set,
-        trunk,
-        hidden,
-    )?)
 }
 
 /// What one update measured.

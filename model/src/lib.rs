@@ -12,8 +12,10 @@
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
 //! and PyTorch. [`DuelingMlp`] is the bare MLP variant over a caller's
-//! `VarStore`, kept for `crossroads doctor`.
+//! `VarStore`, kept for `crossroads doctor`. [`network_spec`] is the
+//! network a run's `[learner]` section describes.
 
+mod config;
 mod dueling;
 mod error;
 mod network;
@@ -23,6 +25,7 @@ pub use crossroads_types::spec::{
     self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
     num_actions_of,
 };
+pub use config::network_spec;
 pub use dueling::{DuelingMlp, MlpSpec};
 pub use error::ModelError;
 pub use network::{QBatch, QNetwork};
