@@ -4,9 +4,9 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+use crossroads_common::Shutdown;
 use crossroads_common::retry::Backoff;
 use crossroads_config::{ActorConfig, TransportConfig};
-use crossroads_common::Shutdown;
 use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;

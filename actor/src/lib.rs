@@ -38,6 +38,7 @@ mod stats;
 mod values;
 mod vec_env;
 mod weights;
+mod worker;
 
 pub use actor::{
     Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
@@ -49,9 +50,7 @@ pub use metrics::ActorMetrics;
 pub use nstep::{
     BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,
 };
-pub use process::{
-    ActorParts, DRAIN, RunningActor, run, start, start_with_max_steps,
-};
+pub use process::{ActorParts, DRAIN, RunningActor, run, start, start_with_max_steps};
 pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};

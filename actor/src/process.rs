@@ -86,10 +86,8 @@ impl RunningActor {
     /// what it did, `None` when it stopped before it had an index, or the
     /// error that stopped it.
     pub async fn join(self) -> Result<Option<RunReport>, ActorError> {
-        match self.task.await {
-            Ok(r) => r,
-            Err(e) => Err(ActorError::Task(format!("actor task failed: {e}"))),
-        }
+        let joined = self.task.await;
+        joined.unwrap_or_else(|e| Err(ActorError::Task(format!("actor task failed: {e}"))))
     }
 }
 
@@ -149,8 +147,8 @@ async fn act(
     max_steps: Option<u64>,
 ) -> Result<Option<RunReport>, ActorError> {
     let ac = &config.actor;
-    let Some(index) = resolve_index(ac.index, ac.count, ac.eval, &config.transport, &shutdown)
-        .await?
+    let Some(index) =
+        resolve_index(ac.index, ac.count, ac.eval, &config.transport, &shutdown).await?
     else {
         // Stopped while the replay server was not up yet: a clean stop.
         tracing::info!("actor stopped before it started acting");

@@ -14,9 +14,9 @@
 
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_config::TransportConfig;
-use crossroads_config::ActorTransport;
 use crossroads_common::{Backoff, Shutdown};
+use crossroads_config::ActorTransport;
+use crossroads_config::TransportConfig;
 use crossroads_model::QNetwork;
 use crossroads_transport::weights_shm::ShmWeightsSubscriber;
 use crossroads_transport::{LearnerClient, WeightsSlot, WeightsWatch};
@@ -25,6 +25,7 @@ use crossroads_types::Weights;
 use crate::error::ActorError;
 use crate::metrics::ActorMetrics;
 use crate::values::{ActionValues, ValuesError};
+use crate::worker::Worker;
 
 /// A Q-network that applies the newest version in its [`WeightsSlot`] at
 /// the start of each [`ActionValues::q_values`] call, and reports the
@@ -155,8 +156,7 @@ impl ActionValues for LiveNetwork {
         })?;
         let started = Instant::now();
         let result = ActionValues::q_values(&mut self.net, obs, n, out);
-        self.metrics
-            .forward_pass(started.elapsed().as_secs_f64());
+        self.metrics.forward_pass(started.elapsed().as_secs_f64());
         result
     }
 }
@@ -167,12 +167,6 @@ impl ActionValues for LiveNetwork {
 pub struct WeightsSubscription {
     stop: Shutdown,
     worker: Option<Worker>,
-}
-
-#[derive(Debug)]
-enum Worker {
-    Task(tokio::task::JoinHandle<()>),
-    Thread(std::thread::JoinHandle<()>),
 }
 
 impl WeightsSubscription {
@@ -203,15 +197,10 @@ impl WeightsSubscription {
             }
             ActorTransport::Shm => {
                 let connection = connection.clone();
-                let stop2 = stop.clone();
-                Worker::Thread(
-                    std::thread::Builder::new()
-                        .name("actor-shm-weights".to_owned())
-                        .spawn(move || shm_worker(&connection, &slot, &stop2))
-                        .map_err(|e| {
-                            ActorError::Config(format!("cannot start the weights thread: {e}"))
-                        })?,
-                )
+                let stop = stop.clone();
+                Worker::thread("actor-shm-weights", "weights", move || {
+                    shm_worker(&connection, &slot, &stop)
+                })?
             }
         };
         Ok(Self {
@@ -223,14 +212,8 @@ impl WeightsSubscription {
     /// Stops receiving and waits for the worker.
     pub async fn stop(mut self) {
         self.stop.trigger();
-        match self.worker.take() {
-            Some(Worker::Task(t)) => {
-                let _ = t.await;
-            }
-            Some(Worker::Thread(t)) => {
-                let _ = tokio::task::spawn_blocking(move || t.join()).await;
-            }
-            None => {}
+        if let Some(worker) = self.worker.take() {
+            let _ = worker.join().await;
         }
     }
 }

@@ -5,8 +5,8 @@
 
 use std::time::{Duration, Instant};
 
-use crossroads_config::{Config, LearnerConfig};
 use crossroads_common::Shutdown;
+use crossroads_config::{Config, LearnerConfig};
 use crossroads_model::NetworkSpec;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};

@@ -14,8 +14,8 @@
 //! `crossroads_transport::weights_shm::ShmWeightsPublisher` for actors on
 //! this host) and writes checkpoints ([`CheckpointStore`]:
 //! safetensors weights, target network and optimizer state plus a JSON
-//! manifest, written atomically). The tonic service
-//! ([`service::LearnerService`]) serves weights, checkpoints and status;
+//! manifest, written atomically). The tonic service (private: no prost
+//! type is in this crate's API) serves weights, checkpoints and status;
 //! its client (`LearnerClient`) and the conversions to and from the wire
 //! are in `crossroads_transport`. [`start`] / [`run`] put it all together
 //! under one shutdown signal. [`bench`](mod@bench) measures updates per
@@ -32,7 +32,7 @@ pub mod metrics;
 pub mod optimizer;
 pub mod sampler;
 pub mod server;
-pub mod service;
+mod service;
 pub mod targets;
 pub mod trainer;
 pub mod training;

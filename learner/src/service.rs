@@ -21,20 +21,20 @@ use crate::checkpoint::{CheckpointStore, StoreError};
 use crate::training::{Command, Shared};
 
 /// Bytes per `CheckpointChunk`.
-pub const CHUNK_BYTES: usize = 256 << 10;
+const CHUNK_BYTES: usize = 256 << 10;
 
 type ResponseStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 
 /// The service; cheap to clone.
 #[derive(Debug, Clone)]
-pub struct LearnerService {
+pub(crate) struct LearnerService {
     shared: Arc<Shared>,
     shutdown: Shutdown,
 }
 
 impl LearnerService {
     /// A service over the learner's shared state.
-    pub fn new(shared: Arc<Shared>, shutdown: Shutdown) -> Self {
+    pub(crate) fn new(shared: Arc<Shared>, shutdown: Shutdown) -> Self {
         Self { shared, shutdown }
     }
 
@@ -84,7 +84,7 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 }
 
 /// The gRPC status of a learner error.
-pub fn to_status(e: LearnerError) -> Status {
+fn to_status(e: LearnerError) -> Status {
     let message = e.to_string();
     match e {
         LearnerError::Store(StoreError::InvalidId { .. }) => Status::invalid_argument(message),

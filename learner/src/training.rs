@@ -8,8 +8,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
 use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 use crossroads_types::Weights;
@@ -21,7 +21,7 @@ use crate::LearnerError;
 use crate::batch::TrainingBatch;
 use crate::checkpoint::{CheckpointEntry, CheckpointStore, NewCheckpoint};
 use crate::metrics::LearnerMetrics;
-use crate::sampler::{Prefetched, PriorityUpdate};
+use crate::sampler::{NewPriorities, Prefetched};
 use crate::trainer::{Trainer, TrainerConfig};
 
 /// How often idle loops look for late shared-memory subscribers.
@@ -96,7 +96,7 @@ pub struct LoopInputs {
     /// Commands from the service.
     pub commands: mpsc::Receiver<Command>,
     /// Priority updates to the replay.
-    pub priorities: mpsc::Sender<PriorityUpdate>,
+    pub priorities: mpsc::Sender<NewPriorities>,
     /// Runtime for waiting on channels from this thread.
     pub handle: Handle,
     /// Stops the loop.
@@ -296,7 +296,7 @@ impl Learner {
         &mut self,
         batch: TrainingBatch,
         waited: Duration,
-        priorities: &mpsc::Sender<PriorityUpdate>,
+        priorities: &mpsc::Sender<NewPriorities>,
     ) -> Result<(), LearnerError> {
         let m = &self.shared.metrics;
         m.sample_wait.observe(waited.as_secs_f64());
@@ -307,7 +307,11 @@ impl Learner {
         m.update_seconds_total
             .inc_by(started.elapsed().as_secs_f64());
 
-        if priorities.try_send((batch.keys, stats.priorities)).is_err() {
+        let update = NewPriorities {
+            keys: batch.keys,
+            priorities: stats.priorities,
+        };
+        if priorities.try_send(update).is_err() {
             m.priority_updates_dropped.inc();
         }
 

@@ -21,11 +21,11 @@ mod error;
 mod network;
 pub mod weights;
 
+pub use config::network_spec;
 pub use crossroads_types::spec::{
     self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
     num_actions_of,
 };
-pub use config::network_spec;
 pub use dueling::{DuelingMlp, MlpSpec};
 pub use error::ModelError;
 pub use network::{QBatch, QNetwork};

@@ -2,8 +2,8 @@
 //! per step, the epsilon ladder from the config, greedy evaluation.
 
 use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
-use crossroads_config::{ActorConfig, ConfigLoader};
 use crossroads_common::Shutdown;
+use crossroads_config::{ActorConfig, ConfigLoader};
 use crossroads_sim::Outcome;
 use crossroads_transport::grpc::ReplayClient;
 

@@ -4,8 +4,8 @@
 use std::time::Duration;
 
 use crossroads_actor::{ActorMetrics, PushConfig, Pusher};
-use crossroads_config::ActorTransport;
 use crossroads_common::Shutdown;
+use crossroads_config::ActorTransport;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;
 

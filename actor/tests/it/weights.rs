@@ -11,8 +11,8 @@ use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, LiveNetwork, PushConfig, Pusher, RunReport,
     WeightsSubscription,
 };
-use crossroads_config::{ActorTransport, Config};
 use crossroads_common::Shutdown;
+use crossroads_config::{ActorTransport, Config};
 use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
 use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
@@ -253,9 +253,7 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
         .expect("network")
         .to_safetensors(4)
         .expect("bytes");
-    assert!(slot.offer(
-        Weights::from_safetensors(bytes, 40, 0).expect("weights")
-    ));
+    assert!(slot.offer(Weights::from_safetensors(bytes, 40, 0).expect("weights")));
     let err = actor.step(&mut live).expect_err("mismatched weights");
     let text = err.to_string();
     assert!(text.contains("weights version 4"), "{text}");
@@ -267,17 +265,13 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
     let wider = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![16]).expect("spec");
     let net = QNetwork::new(wider.clone(), 5).expect("network");
     let bytes = |version| net.to_safetensors(version).expect("bytes");
-    assert!(slot.offer(
-        Weights::from_safetensors(bytes(6), 60, 0).expect("weights")
-    ));
+    assert!(slot.offer(Weights::from_safetensors(bytes(6), 60, 0).expect("weights")));
     actor
         .step(&mut live)
         .expect("step with the learner's network");
     assert_eq!(live.version(), 6);
     assert_eq!(live.network().spec(), &wider);
-    assert!(!slot.offer(
-        Weights::from_safetensors(bytes(5), 50, 0).expect("weights")
-    ));
+    assert!(!slot.offer(Weights::from_safetensors(bytes(5), 50, 0).expect("weights")));
     assert_eq!(slot.version(), 6);
     assert_eq!(live.obs_len(), actor.envs().obs_len());
 }

@@ -5,8 +5,8 @@
 use std::path::Path;
 use std::time::Duration;
 
-use crossroads_config::Config;
 use crossroads_common::Shutdown;
+use crossroads_config::Config;
 use crossroads_learner::bench::fill_replay;
 use crossroads_learner::{RunningLearner, TrainerConfig};
 use crossroads_transport::LearnerClient;
@@ -308,7 +308,10 @@ fn weights_reach_a_late_shared_memory_subscriber() {
     };
     let weights = |version: u64, hidden: i64| {
         let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![hidden]).unwrap();
-        let bytes = QNetwork::new(spec, 1).unwrap().to_safetensors(version).unwrap();
+        let bytes = QNetwork::new(spec, 1)
+            .unwrap()
+            .to_safetensors(version)
+            .unwrap();
         Weights::from_safetensors(bytes, version * 10, 100 + version as i64).unwrap()
     };
     let (first, second) = (weights(1, 2), weights(2, 2));

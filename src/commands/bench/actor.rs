@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use crossroads_actor::{ActorMetrics, ActorParts, PushConfig, Pusher, hostname};
-use crossroads_config::{ActorTransport, Config};
 use crossroads_common::Shutdown;
+use crossroads_config::{ActorTransport, Config};
 use crossroads_learner::bench::median;
 use crossroads_replay::{PreparedBatch, Table};
 use serde::Serialize;
