@@ -22,6 +22,10 @@ pub enum ActorError {
     /// Shared memory could not be set up.
     #[error("shared memory: {0}")]
     Shm(#[from] ShmError),
+    /// The actor's task or acting thread failed (panicked or was
+    /// cancelled).
+    #[error("{0}")]
+    Task(String),
     /// A metric could not be registered.
     #[error("cannot register actor metrics: {0}")]
     Metrics(#[from] prometheus::Error),

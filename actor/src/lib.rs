@@ -18,9 +18,12 @@
 //! [`EpisodeStats`] sums episode ends for evaluation reports;
 //! [`ActorMetrics`] are the `crossroads_actor_*` metrics. A
 //! [`WeightsSubscription`] receives the learner's weights (gRPC stream or
-//! iceoryx2) into a [`WeightsSlot`]; a [`LiveNetwork`] applies the newest
-//! between steps. Configuration:
-//! the `[actor]` section ([`crossroads_config::ActorConfig`]) through
+//! iceoryx2) into a `crossroads_transport::WeightsSlot`; a [`LiveNetwork`]
+//! applies the newest between steps. [`start`] / [`run`] put it all
+//! together for one actor process under one shutdown signal
+//! ([`ActorParts`] is the actor it assembles, for benches).
+//! Configuration: the `[actor]` section
+//! ([`crossroads_config::ActorConfig`]) through
 //! [`ActorSettings::from_config`] and [`resolve_index`].
 
 mod actor;
@@ -29,11 +32,13 @@ mod error;
 mod exploration;
 mod metrics;
 mod nstep;
+mod process;
 mod push;
 mod stats;
 mod values;
 mod vec_env;
 mod weights;
+mod worker;
 
 pub use actor::{
     Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
@@ -46,8 +51,9 @@ pub use metrics::ActorMetrics;
 pub use nstep::{
     BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,
 };
+pub use process::{ActorParts, DRAIN, RunningActor, run, start, start_with_max_steps};
 pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};
 pub use vec_env::{EnvStep, EpisodeEnd, VecEnv, batch_spec};
-pub use weights::{LiveNetwork, WeightsSlot, WeightsSubscription, WeightsUpdate};
+pub use weights::{LiveNetwork, WeightsSubscription};

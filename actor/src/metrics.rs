@@ -15,6 +15,8 @@
 //! | `crossroads_actor_push_latency_seconds` | histogram | transport | from sending a batch to its acknowledgement |
 //! | `crossroads_actor_weights_version` | gauge | | version of the weights in use |
 //! | `crossroads_actor_weights_staleness_seconds` | gauge | | age of the weights in use |
+//! | `crossroads_actor_forward_passes_total` | counter | | batched forward passes of the network (one per vectorized step) |
+//! | `crossroads_actor_inference_seconds_total` | counter | | time in those forward passes |
 //! | `crossroads_actor_backpressure_seconds_total` | counter | | time the acting loop waited for a live replay that was behind (its rate limiter) |
 //! | `crossroads_actor_epsilon` | gauge | | mean exploration epsilon over the environments (0 when greedy) |
 
@@ -50,6 +52,8 @@ pub struct ActorMetrics {
     pub epsilon: Gauge,
     /// Seconds the acting loop waited for a replay that was behind.
     pub backpressure_seconds: Counter,
+    forward_passes: IntCounter,
+    inference_seconds: Counter,
 }
 
 impl ActorMetrics {
@@ -137,7 +141,17 @@ impl ActorMetrics {
             "crossroads_actor_backpressure_seconds_total",
             "Seconds the acting loop waited for a live replay that was behind (its rate limiter)",
         )?;
+        let forward_passes = IntCounter::new(
+            "crossroads_actor_forward_passes_total",
+            "Batched forward passes of the network (one per vectorized step)",
+        )?;
+        let inference_seconds = Counter::new(
+            "crossroads_actor_inference_seconds_total",
+            "Seconds spent in the network's forward passes",
+        )?;
         if let Some(r) = registry {
+            r.register(Box::new(forward_passes.clone()))?;
+            r.register(Box::new(inference_seconds.clone()))?;
             r.register(Box::new(backpressure_seconds.clone()))?;
             r.register(Box::new(env_steps.clone()))?;
             r.register(Box::new(decisions.clone()))?;
@@ -175,7 +189,25 @@ impl ActorMetrics {
             weights_staleness,
             epsilon,
             backpressure_seconds,
+            forward_passes,
+            inference_seconds,
         })
+    }
+
+    /// One forward pass of the network, of `seconds`.
+    pub fn forward_pass(&self, seconds: f64) {
+        self.forward_passes.inc();
+        self.inference_seconds.inc_by(seconds);
+    }
+
+    /// Forward passes so far.
+    pub fn forward_passes_total(&self) -> u64 {
+        self.forward_passes.get()
+    }
+
+    /// Seconds in forward passes so far.
+    pub fn inference_seconds_total(&self) -> f64 {
+        self.inference_seconds.get()
     }
 
     /// The weights in use: their version and their age in seconds (from

@@ -25,6 +25,7 @@ use crossroads_types::{TransitionBatch, ValidBatch};
 use crate::buffer::PushBuffer;
 use crate::error::ActorError;
 use crate::metrics::ActorMetrics;
+use crate::worker::Worker;
 
 /// Where and how a [`Pusher`] delivers.
 #[derive(Debug, Clone)]
@@ -51,20 +52,6 @@ impl PushConfig {
             buffer_batches: config.actor.buffer_batches,
             in_flight: config.actor.in_flight,
         }
-    }
-}
-
-enum Worker {
-    Task(tokio::task::JoinHandle<()>),
-    Thread(std::thread::JoinHandle<()>),
-}
-
-impl std::fmt::Debug for Worker {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Worker::Task(_) => "Task",
-            Worker::Thread(_) => "Thread",
-        })
     }
 }
 
@@ -111,14 +98,9 @@ impl Pusher {
                 let client = ReplayClient::new(&config.connection, &config.table)?;
                 Worker::Task(tokio::spawn(grpc_worker(ctx, client)))
             }
-            ActorTransport::Shm => Worker::Thread(
-                std::thread::Builder::new()
-                    .name("actor-shm-push".to_owned())
-                    .spawn(move || shm_worker(ctx))
-                    .map_err(|e| {
-                        ActorError::Config(format!("cannot start the push thread: {e}"))
-                    })?,
-            ),
+            ActorTransport::Shm => {
+                Worker::thread("actor-shm-push", "push", move || shm_worker(ctx))?
+            }
         };
         Ok(Self {
             buffer,
@@ -165,19 +147,10 @@ impl Pusher {
         let stop = self.stop.clone();
         let worker = self.worker.take();
         let waited = async move {
-            match worker {
-                Some(Worker::Task(task)) => {
-                    if let Err(e) = task.await {
-                        tracing::error!(error = %e, "gRPC push task failed");
-                    }
-                }
-                Some(Worker::Thread(thread)) => {
-                    let joined = tokio::task::spawn_blocking(move || thread.join()).await;
-                    if !matches!(joined, Ok(Ok(()))) {
-                        tracing::error!("shared-memory push thread failed");
-                    }
-                }
-                None => {}
+            if let Some(worker) = worker
+                && let Err(e) = worker.join().await
+            {
+                tracing::error!(error = %e, "push worker failed");
             }
         };
         tokio::pin!(waited);

@@ -19,52 +19,9 @@ pub trait ActionValues {
     /// Actions scored per observation.
     fn num_actions(&self) -> usize;
 
-    /// Writes the Q-values of `observations` (`n x obs_len`) into `out`
-    /// (`n x num_actions`).
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError>;
-}
-
-impl<T: ActionValues + ?Sized> ActionValues for &mut T {
-    fn obs_len(&self) -> usize {
-        (**self).obs_len()
-    }
-
-    fn num_actions(&self) -> usize {
-        (**self).num_actions()
-    }
-
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError> {
-        (**self).q_values(observations, n, out)
-    }
-}
-
-impl<T: ActionValues + ?Sized> ActionValues for Box<T> {
-    fn obs_len(&self) -> usize {
-        (**self).obs_len()
-    }
-
-    fn num_actions(&self) -> usize {
-        (**self).num_actions()
-    }
-
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError> {
-        (**self).q_values(observations, n, out)
-    }
+    /// Writes the Q-values of the observations `obs` (`n x obs_len`) into
+    /// `out` (`n x num_actions`).
+    fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError>;
 }
 
 /// The Q-network drives the actor: one batched forward pass per call, no
@@ -79,20 +36,12 @@ impl ActionValues for crossroads_model::QNetwork {
         self.spec().num_actions as usize
     }
 
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError> {
+    fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError> {
         let len = n * self.obs_len();
-        let obs = observations.get(..len).ok_or_else(|| {
-            format!(
-                "{n} observations need {len} values, got {}",
-                observations.len()
-            )
-        })?;
-        let q = self.infer(obs, n)?;
+        let rows = obs
+            .get(..len)
+            .ok_or_else(|| format!("{n} observations need {len} values, got {}", obs.len()))?;
+        let q = self.infer(rows, n)?;
         if out.len() < q.q.len() {
             return Err(format!(
                 "output holds {} values, the network wrote {}",

@@ -12,83 +12,25 @@
 //! learner is unreachable the subscription retries with backoff and the
 //! actor acts on the last weights it has.
 
-use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::{Backoff, Shutdown};
 use crossroads_config::ActorTransport;
 use crossroads_config::TransportConfig;
 use crossroads_model::QNetwork;
-use crossroads_transport::LearnerClient;
 use crossroads_transport::weights_shm::ShmWeightsSubscriber;
-use tokio::sync::watch;
+use crossroads_transport::{LearnerClient, WeightsSlot, WeightsWatch};
+use crossroads_types::Weights;
 
 use crate::error::ActorError;
 use crate::metrics::ActorMetrics;
 use crate::values::{ActionValues, ValuesError};
-
-/// One published version of the learner's network.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct WeightsUpdate {
-    /// Strictly increasing over the learner's life.
-    pub version: u64,
-    /// Learner update step the weights come from.
-    pub update_step: u64,
-    /// Unix milliseconds of publication (for staleness).
-    pub published_unix_ms: i64,
-    /// safetensors bytes, with the network spec in their metadata.
-    pub safetensors: Vec<u8>,
-}
-
-/// Holds the newest [`WeightsUpdate`] received; older or equal versions
-/// offered later are ignored. Cheap to clone (clones share the slot);
-/// written by a subscription, read by a [`LiveNetwork`].
-#[derive(Debug, Clone)]
-pub struct WeightsSlot {
-    tx: Arc<watch::Sender<Option<Arc<WeightsUpdate>>>>,
-}
-
-impl Default for WeightsSlot {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl WeightsSlot {
-    /// An empty slot.
-    pub fn new() -> Self {
-        Self {
-            tx: Arc::new(watch::Sender::new(None)),
-        }
-    }
-
-    /// Keeps `update` if it is newer than what the slot holds; returns
-    /// whether it was.
-    pub fn offer(&self, update: WeightsUpdate) -> bool {
-        let update = Arc::new(update);
-        self.tx.send_if_modified(|held| {
-            if held.as_ref().is_none_or(|h| update.version > h.version) {
-                *held = Some(Arc::clone(&update));
-                true
-            } else {
-                false
-            }
-        })
-    }
-
-    /// The version held (0 when none).
-    pub fn version(&self) -> u64 {
-        self.tx.borrow().as_ref().map_or(0, |w| w.version)
-    }
-
-    fn receiver(&self) -> watch::Receiver<Option<Arc<WeightsUpdate>>> {
-        self.tx.subscribe()
-    }
-}
+use crate::worker::Worker;
 
 /// A Q-network that applies the newest version in its [`WeightsSlot`] at
 /// the start of each [`ActionValues::q_values`] call, and reports the
-/// version in use and its age to [`ActorMetrics`].
+/// version in use and its age, and each forward pass and its time, to
+/// [`ActorMetrics`].
 ///
 /// Weights of another architecture with the same input length and action
 /// count replace the network; weights that cannot drive these environments
@@ -99,7 +41,7 @@ pub struct LiveNetwork {
     net: QNetwork,
     version: u64,
     applied_at: (Instant, Option<i64>),
-    slot: watch::Receiver<Option<Arc<WeightsUpdate>>>,
+    slot: WeightsWatch,
     metrics: ActorMetrics,
     applied: u64,
 }
@@ -123,7 +65,7 @@ impl LiveNetwork {
             net,
             version: 0,
             applied_at: (Instant::now(), None),
-            slot: slot.receiver(),
+            slot: slot.watch(),
             metrics,
             applied: 0,
         }
@@ -147,11 +89,8 @@ impl LiveNetwork {
     /// Takes the slot's version if newer than the one in use; updates the
     /// version and staleness metrics either way.
     pub fn refresh(&mut self) -> Result<(), ActorError> {
-        if self.slot.has_changed().unwrap_or(false) {
-            let update = self.slot.borrow_and_update().clone();
-            if let Some(w) = update.filter(|w| w.version > self.version) {
-                self.apply(&w)?;
-            }
+        if let Some(w) = self.slot.newer_than(self.version) {
+            self.apply(&w)?;
         }
         let age = match self.applied_at {
             (_, Some(published_ms)) => (unix_ms() - published_ms) as f64 / 1e3,
@@ -161,7 +100,7 @@ impl LiveNetwork {
         Ok(())
     }
 
-    fn apply(&mut self, w: &WeightsUpdate) -> Result<(), ActorError> {
+    fn apply(&mut self, w: &Weights) -> Result<(), ActorError> {
         if let Err(e) = self.net.load_safetensors(&w.safetensors) {
             let (net, _) = QNetwork::from_safetensors(&w.safetensors).map_err(|e2| {
                 ActorError::Values(format!(
@@ -210,17 +149,15 @@ impl ActionValues for LiveNetwork {
         ActionValues::num_actions(&self.net)
     }
 
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError> {
+    fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError> {
         self.refresh().map_err(|e| match e {
             ActorError::Values(message) => ValuesError::from(message),
             other => Box::new(other),
         })?;
-        ActionValues::q_values(&mut self.net, observations, n, out)
+        let started = Instant::now();
+        let result = ActionValues::q_values(&mut self.net, obs, n, out);
+        self.metrics.forward_pass(started.elapsed().as_secs_f64());
+        result
     }
 }
 
@@ -230,12 +167,6 @@ impl ActionValues for LiveNetwork {
 pub struct WeightsSubscription {
     stop: Shutdown,
     worker: Option<Worker>,
-}
-
-#[derive(Debug)]
-enum Worker {
-    Task(tokio::task::JoinHandle<()>),
-    Thread(std::thread::JoinHandle<()>),
 }
 
 impl WeightsSubscription {
@@ -266,15 +197,10 @@ impl WeightsSubscription {
             }
             ActorTransport::Shm => {
                 let connection = connection.clone();
-                let stop2 = stop.clone();
-                Worker::Thread(
-                    std::thread::Builder::new()
-                        .name("actor-shm-weights".to_owned())
-                        .spawn(move || shm_worker(&connection, &slot, &stop2))
-                        .map_err(|e| {
-                            ActorError::Config(format!("cannot start the weights thread: {e}"))
-                        })?,
-                )
+                let stop = stop.clone();
+                Worker::thread("actor-shm-weights", "weights", move || {
+                    shm_worker(&connection, &slot, &stop)
+                })?
             }
         };
         Ok(Self {
@@ -286,14 +212,8 @@ impl WeightsSubscription {
     /// Stops receiving and waits for the worker.
     pub async fn stop(mut self) {
         self.stop.trigger();
-        match self.worker.take() {
-            Some(Worker::Task(t)) => {
-                let _ = t.await;
-            }
-            Some(Worker::Thread(t)) => {
-                let _ = tokio::task::spawn_blocking(move || t.join()).await;
-            }
-            None => {}
+        if let Some(worker) = self.worker.take() {
+            let _ = worker.join().await;
         }
     }
 }
@@ -330,12 +250,7 @@ async fn grpc_worker(
                             failing = false;
                         }
                         backoff.reset();
-                        slot.offer(WeightsUpdate {
-                            version: w.version,
-                            update_step: w.update_step,
-                            published_unix_ms: w.published_unix_ms,
-                            safetensors: w.safetensors,
-                        });
+                        slot.offer(w);
                     }
                     Ok(None) => {
                         tracing::info!(%endpoint, "the learner ended the weights stream; resubscribing");
@@ -380,12 +295,7 @@ fn shm_worker(connection: &TransportConfig, slot: &WeightsSlot, stop: &Shutdown)
                     match subscriber.latest() {
                         Ok(Some(w)) => {
                             failing = false;
-                            slot.offer(WeightsUpdate {
-                                version: w.version,
-                                update_step: w.update_step,
-                                published_unix_ms: w.published_unix_ms,
-                                safetensors: w.safetensors,
-                            });
+                            slot.offer(w);
                         }
                         Ok(None) => std::thread::sleep(SHM_POLL),
                         Err(e) => {

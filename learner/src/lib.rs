@@ -9,12 +9,13 @@
 //! `no_grad`, importance-weighted Huber loss, [`Optimizer`] step with
 //! gradient clipping, target-network update), hands the new priorities to
 //! [`sampler::spawn_priority_sender`], and on its schedules publishes the
-//! weights (a monotonic version; [`broadcast::WeightsHub`] for the gRPC
-//! stream, `crossroads_transport::weights_shm::ShmWeightsPublisher` for
-//! actors on this host) and writes checkpoints ([`CheckpointStore`]:
+//! weights (a monotonic version, into a
+//! `crossroads_transport::WeightsSlot` that the gRPC stream reads, and
+//! `crossroads_transport::weights_shm::ShmWeightsPublisher` for actors on
+//! this host) and writes checkpoints ([`CheckpointStore`]:
 //! safetensors weights, target network and optimizer state plus a JSON
-//! manifest, written atomically). The tonic service
-//! ([`service::LearnerService`]) serves weights, checkpoints and status;
+//! manifest, written atomically). The tonic service (private: no prost
+//! type is in this crate's API) serves weights, checkpoints and status;
 //! its client (`LearnerClient`) and the conversions to and from the wire
 //! are in `crossroads_transport`. [`start`] / [`run`] put it all together
 //! under one shutdown signal. [`bench`](mod@bench) measures updates per
@@ -25,14 +26,13 @@
 
 pub mod batch;
 pub mod bench;
-pub mod broadcast;
 pub mod checkpoint;
 mod error;
 pub mod metrics;
 pub mod optimizer;
 pub mod sampler;
 pub mod server;
-pub mod service;
+mod service;
 pub mod targets;
 pub mod trainer;
 pub mod training;
@@ -43,4 +43,4 @@ pub use error::LearnerError;
 pub use metrics::LearnerMetrics;
 pub use optimizer::{Optimizer, OptimizerConfig};
 pub use server::{RunningLearner, run, start};
-pub use trainer::{Trainer, TrainerConfig, UpdateStats, network_spec};
+pub use trainer::{Trainer, TrainerConfig, UpdateStats};

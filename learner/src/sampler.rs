@@ -148,8 +148,15 @@ pub fn spawn_prefetch(
     (rx, task)
 }
 
-/// One priority update: keys and their new priorities.
-pub type PriorityUpdate = (Vec<u64>, Vec<f32>);
+/// New priorities for sampled items, from one update: what the learner
+/// sends (the replay's answer is `crossroads_transport::PriorityUpdate`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewPriorities {
+    /// Item keys, in batch order.
+    pub keys: Vec<u64>,
+    /// Their new priorities, in the same order.
+    pub priorities: Vec<f32>,
+}
 
 /// Sends priority updates in order, in the background. The training loop
 /// `try_send`s into the returned channel (of `capacity` updates) and counts
@@ -160,8 +167,8 @@ pub fn spawn_priority_sender(
     capacity: usize,
     metrics: LearnerMetrics,
     shutdown: Shutdown,
-) -> (mpsc::Sender<PriorityUpdate>, JoinHandle<()>) {
-    let (tx, mut rx) = mpsc::channel::<PriorityUpdate>(capacity.max(1));
+) -> (mpsc::Sender<NewPriorities>, JoinHandle<()>) {
+    let (tx, mut rx) = mpsc::channel::<NewPriorities>(capacity.max(1));
     let task = tokio::spawn(async move {
         let mut failing = false;
         loop {
@@ -169,7 +176,7 @@ pub fn spawn_priority_sender(
                 _ = shutdown.wait() => break,
                 u = rx.recv() => u,
             };
-            let Some((keys, priorities)) = update else {
+            let Some(NewPriorities { keys, priorities }) = update else {
                 break;
             };
             match client.update_priorities(keys, priorities).await {

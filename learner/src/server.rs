@@ -14,8 +14,10 @@ use std::sync::atomic::AtomicU64;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::{Backoff, Shutdown};
-use crossroads_config::Config;
+use crossroads_config::{Config, LearnerConfig};
+use crossroads_model::NetworkSpec;
 use crossroads_proto::v1::learner_server::LearnerServer;
+use crossroads_transport::WeightsSlot;
 use crossroads_transport::grpc::ReplayClient;
 use parking_lot::Mutex;
 use prometheus::Registry;
@@ -25,10 +27,11 @@ use tokio::task::JoinHandle;
 use tokio_stream::wrappers::TcpListenerStream;
 
 use crate::LearnerError;
-use crate::broadcast::WeightsHub;
 use crate::checkpoint::CheckpointStore;
 use crate::metrics::LearnerMetrics;
-use crate::sampler::{BetaSchedule, PrefetchConfig, spawn_prefetch, spawn_priority_sender};
+use crate::sampler::{
+    BetaSchedule, NewPriorities, PrefetchConfig, Prefetched, spawn_prefetch, spawn_priority_sender,
+};
 use crate::service::LearnerService;
 use crate::trainer::TrainerConfig;
 use crate::training::{Learner, LoopInputs, Shared, StatusView};
@@ -70,16 +73,20 @@ impl RunningLearner {
     /// Waits until the learner has stopped and written its last
     /// checkpoint; returns the error that stopped training, if any.
     pub async fn join(self) -> Result<(), LearnerError> {
-        match self.task.await {
-            Ok(r) => r,
-            Err(e) => Err(LearnerError::Serve(format!("learner task failed: {e}"))),
-        }
+        let joined = self.task.await;
+        joined.unwrap_or_else(|e| Err(LearnerError::Serve(format!("learner task failed: {e}"))))
     }
 }
 
 /// Starts the learner `config.learner` describes, sampling from
 /// `config.transport.replay_endpoint`, with its metrics in `registry` when
 /// given. Must be called inside a multi-threaded tokio runtime.
+///
+/// In order: the checkpoint store, the state the training thread and the
+/// service share, the gRPC listener, the replay conversations (prefetcher
+/// and priority sender), the training thread (which builds the networks
+/// and publishes the first weights before this returns), the
+/// checkpoint-age refresher and the gRPC server.
 pub async fn start(
     config: &Config,
     registry: Option<&Registry>,
@@ -91,23 +98,13 @@ pub async fn start(
         tch::set_num_threads(config.runtime.compute_threads as i32);
     }
     let metrics = LearnerMetrics::new(registry)?;
-    let store = match &lc.checkpoint_dir {
-        Some(dir) => Some(Arc::new(CheckpointStore::open(
-            dir.clone(),
-            lc.checkpoint_keep as usize,
-            &lc.best_metric,
-        )?)),
-        None => {
-            tracing::warn!("learner.checkpoint_dir is not set: no checkpoints will be written");
-            None
-        }
-    };
+    let store = open_store(lc)?;
     // The learner stops on the caller's shutdown, or alone (max_updates,
     // a fatal error, RunningLearner::stop).
     let stop = shutdown.child();
-    let (commands_tx, commands_rx) = mpsc::channel(16);
+    let (commands_tx, commands) = mpsc::channel(16);
     let shared = Arc::new(Shared {
-        hub: WeightsHub::new(),
+        weights: WeightsSlot::new(),
         store,
         status: Mutex::new(StatusView::default()),
         commands: commands_tx,
@@ -116,14 +113,77 @@ pub async fn start(
         started: Instant::now(),
         steps: Arc::new(AtomicU64::new(0)),
     });
+    let (listener, addr) = bind(lc.listen).await?;
+    let replay = start_replay_conversations(config, spec, &shared, &stop)?;
+    let inputs = LoopInputs {
+        batches: replay.batches,
+        commands,
+        priorities: replay.priorities,
+        handle: tokio::runtime::Handle::current(),
+        shutdown: stop.clone(),
+    };
+    let trained = start_training(Arc::clone(&shared), inputs, config, &stop).await?;
+    let age_task = spawn_checkpoint_age(metrics, stop.clone());
+    let served = serve(listener, Arc::clone(&shared), stop.clone());
+    tracing::info!(
+        %addr,
+        replay = %config.transport.replay_endpoint,
+        observation = config.sim.observation().unwrap_or("unresolved"),
+        action_set = %config.sim.action_set,
+        "learner listening"
+    );
 
-    let listener = TcpListener::bind(lc.listen)
-        .await
-        .map_err(|e| LearnerError::Serve(format!("cannot listen on {}: {e}", lc.listen)))?;
-    let addr = listener
-        .local_addr()
-        .map_err(|e| LearnerError::Serve(format!("cannot listen on {}: {e}", lc.listen)))?;
+    let (prefetch_task, priority_task) = replay.tasks;
+    let task = tokio::spawn(async move {
+        let served = served.await.map_err(|e| LearnerError::Serve(e.to_string()));
+        let trained = trained.await.unwrap_or(Err(LearnerError::Stopped));
+        let _ = tokio::join!(prefetch_task, priority_task, age_task);
+        trained.and(served)
+    });
+    Ok(RunningLearner {
+        addr,
+        shared,
+        stop,
+        task,
+    })
+}
 
+/// The checkpoint store `learner.checkpoint_dir` names, if any.
+fn open_store(lc: &LearnerConfig) -> Result<Option<Arc<CheckpointStore>>, LearnerError> {
+    let Some(dir) = &lc.checkpoint_dir else {
+        tracing::warn!("learner.checkpoint_dir is not set: no checkpoints will be written");
+        return Ok(None);
+    };
+    let store = CheckpointStore::open(dir.clone(), lc.checkpoint_keep as usize, &lc.best_metric)?;
+    Ok(Some(Arc::new(store)))
+}
+
+/// The gRPC listener on `listen` (port 0 picks a free one) and the address
+/// it got.
+async fn bind(listen: SocketAddr) -> Result<(TcpListener, SocketAddr), LearnerError> {
+    let failed = |e: std::io::Error| LearnerError::Serve(format!("cannot listen on {listen}: {e}"));
+    let listener = TcpListener::bind(listen).await.map_err(failed)?;
+    let addr = listener.local_addr().map_err(failed)?;
+    Ok((listener, addr))
+}
+
+/// The learner's side of the replay: prefetched batches in, priority
+/// updates out, and the two tasks behind them.
+struct ReplayConversations {
+    batches: mpsc::Receiver<Prefetched>,
+    priorities: mpsc::Sender<NewPriorities>,
+    tasks: (JoinHandle<()>, JoinHandle<()>),
+}
+
+/// Starts the prefetcher (sampled batches of `spec`'s network, beta
+/// following the training thread's step) and the priority sender.
+fn start_replay_conversations(
+    config: &Config,
+    spec: NetworkSpec,
+    shared: &Shared,
+    stop: &Shutdown,
+) -> Result<ReplayConversations, LearnerError> {
+    let lc = &config.learner;
     let client = ReplayClient::new(&config.transport, &config.replay.table)?;
     let (batches, prefetch_task) = spawn_prefetch(
         client.clone(),
@@ -135,24 +195,30 @@ pub async fn start(
             spec,
         },
         Backoff::from_config(&config.transport),
-        metrics.clone(),
+        shared.metrics.clone(),
         stop.clone(),
     );
     let (priorities, priority_task) =
-        spawn_priority_sender(client, PRIORITY_QUEUE, metrics.clone(), stop.clone());
+        spawn_priority_sender(client, PRIORITY_QUEUE, shared.metrics.clone(), stop.clone());
+    Ok(ReplayConversations {
+        batches,
+        priorities,
+        tasks: (prefetch_task, priority_task),
+    })
+}
 
-    // The training thread builds the networks itself (the shared-memory
-    // publisher must live on the thread that uses it) and reports back.
+/// Starts the training thread and waits until it has built the networks
+/// (the shared-memory publisher must live on the thread that uses it) and
+/// published the first weights; the receiver answers with how training
+/// ended. The thread fires `stop` when it ends.
+async fn start_training(
+    shared: Arc<Shared>,
+    inputs: LoopInputs,
+    config: &Config,
+    stop: &Shutdown,
+) -> Result<oneshot::Receiver<Result<(), LearnerError>>, LearnerError> {
     let (ready_tx, ready_rx) = oneshot::channel();
     let (done_tx, done_rx) = oneshot::channel();
-    let inputs = LoopInputs {
-        batches,
-        commands: commands_rx,
-        priorities,
-        handle: tokio::runtime::Handle::current(),
-        shutdown: stop.clone(),
-    };
-    let thread_shared = shared.clone();
     let thread_stop = stop.clone();
     let threads = config.runtime.compute_threads;
     std::thread::Builder::new()
@@ -167,7 +233,7 @@ pub async fn start(
                 torch_threads = tch::get_num_threads(),
                 "training thread started"
             );
-            let learner = match Learner::new(thread_shared) {
+            let learner = match Learner::new(shared) {
                 Ok(l) => {
                     let _ = ready_tx.send(Ok(()));
                     l
@@ -183,63 +249,51 @@ pub async fn start(
         })
         .map_err(|e| LearnerError::Serve(format!("cannot start the training thread: {e}")))?;
     match ready_rx.await {
-        Ok(Ok(())) => {}
+        Ok(Ok(())) => Ok(done_rx),
         Ok(Err(e)) => {
             stop.trigger();
-            return Err(e);
+            Err(e)
         }
         Err(_) => {
             stop.trigger();
-            return Err(LearnerError::Stopped);
+            Err(LearnerError::Stopped)
         }
     }
+}
 
-    let age_metrics = metrics.clone();
-    let age_stop = stop.clone();
-    let age_task = tokio::spawn(async move {
+/// Refreshes `crossroads_learner_checkpoint_age_seconds` every second
+/// until `stop`.
+fn spawn_checkpoint_age(metrics: LearnerMetrics, stop: Shutdown) -> JoinHandle<()> {
+    tokio::spawn(async move {
         loop {
             let now = SystemTime::now()
                 .duration_since(UNIX_EPOCH)
                 .map(|d| d.as_secs_f64())
                 .unwrap_or(0.0);
-            age_metrics.refresh_checkpoint_age(now);
+            metrics.refresh_checkpoint_age(now);
             tokio::select! {
-                _ = age_stop.wait() => break,
+                _ = stop.wait() => break,
                 _ = tokio::time::sleep(Duration::from_secs(1)) => {}
             }
         }
-    });
+    })
+}
 
-    let service = LearnerServer::new(LearnerService::new(shared.clone(), stop.clone()))
+/// The gRPC server on `listener` until `stop` (then it drains).
+fn serve(
+    listener: TcpListener,
+    shared: Arc<Shared>,
+    stop: Shutdown,
+) -> impl Future<Output = Result<(), tonic::transport::Error>> {
+    let service = LearnerServer::new(LearnerService::new(shared, stop.clone()))
         .max_decoding_message_size(16 << 20)
         .max_encoding_message_size(usize::MAX);
-    let serve = tonic::transport::Server::builder()
+    tonic::transport::Server::builder()
         .tcp_nodelay(true)
         .add_service(service)
-        .serve_with_incoming_shutdown(TcpListenerStream::new(listener), {
-            let stop = stop.clone();
-            async move { stop.wait().await }
-        });
-    tracing::info!(
-        %addr,
-        replay = %config.transport.replay_endpoint,
-        observation = config.sim.observation().unwrap_or("unresolved"),
-        action_set = %config.sim.action_set,
-        "learner listening"
-    );
-
-    let task = tokio::spawn(async move {
-        let served = serve.await.map_err(|e| LearnerError::Serve(e.to_string()));
-        let trained = done_rx.await.unwrap_or(Err(LearnerError::Stopped));
-        let _ = tokio::join!(prefetch_task, priority_task, age_task);
-        trained.and(served)
-    });
-    Ok(RunningLearner {
-        addr,
-        shared,
-        stop,
-        task,
-    })
+        .serve_with_incoming_shutdown(TcpListenerStream::new(listener), async move {
+            stop.wait().await
+        })
 }
 
 /// Runs the learner until `shutdown` fires (or `learner.max_updates`).

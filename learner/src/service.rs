@@ -21,20 +21,20 @@ use crate::checkpoint::{CheckpointStore, StoreError};
 use crate::training::{Command, Shared};
 
 /// Bytes per `CheckpointChunk`.
-pub const CHUNK_BYTES: usize = 256 << 10;
+const CHUNK_BYTES: usize = 256 << 10;
 
 type ResponseStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 
 /// The service; cheap to clone.
 #[derive(Debug, Clone)]
-pub struct LearnerService {
+pub(crate) struct LearnerService {
     shared: Arc<Shared>,
     shutdown: Shutdown,
 }
 
 impl LearnerService {
     /// A service over the learner's shared state.
-    pub fn new(shared: Arc<Shared>, shutdown: Shutdown) -> Self {
+    pub(crate) fn new(shared: Arc<Shared>, shutdown: Shutdown) -> Self {
         Self { shared, shutdown }
     }
 
@@ -84,7 +84,7 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 }
 
 /// The gRPC status of a learner error.
-pub fn to_status(e: LearnerError) -> Status {
+fn to_status(e: LearnerError) -> Status {
     let message = e.to_string();
     match e {
         LearnerError::Store(StoreError::InvalidId { .. }) => Status::invalid_argument(message),
@@ -123,24 +123,21 @@ impl pb::learner_server::Learner for LearnerService {
         request: Request<pb::SubscribeWeightsRequest>,
     ) -> Result<Response<Self::SubscribeWeightsStream>, Status> {
         let mut have = request.into_inner().have_version;
-        let mut rx = self.shared.hub.subscribe();
+        let mut watch = self.shared.weights.watch();
         let (tx, out) = mpsc::channel(2);
         let shutdown = self.shutdown.clone();
         let subscribers = self.shared.metrics.weight_subscribers.clone();
         subscribers.inc();
         tokio::spawn(async move {
             loop {
-                let latest = rx.borrow_and_update().clone();
-                if let Some(w) = latest
-                    && w.version > have
-                {
+                if let Some(w) = watch.newer_than(have) {
                     have = w.version;
                     if tx.send(Ok(weights_to_wire(&w))).await.is_err() {
                         break;
                     }
                 }
                 tokio::select! {
-                    changed = rx.changed() => if changed.is_err() { break },
+                    changed = watch.changed() => if !changed { break },
                     _ = shutdown.wait() => break,
                     _ = tx.closed() => break,
                 }
@@ -155,7 +152,7 @@ impl pb::learner_server::Learner for LearnerService {
         _request: Request<pb::GetLatestWeightsRequest>,
     ) -> Result<Response<pb::Weights>, Status> {
         self.shared
-            .hub
+            .weights
             .latest()
             .map(|w| Response::new(weights_to_wire(&w)))
             .ok_or_else(|| Status::not_found("no weights published yet"))

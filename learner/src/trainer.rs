@@ -1,8 +1,8 @@
 //! [`Trainer`]: the online and target networks and the optimizer, and
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
 
-use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate, Trunk};
-use crossroads_model::{ModelError, NetworkSpec, QNetwork, TrunkKind};
+use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate};
+use crossroads_model::{NetworkSpec, QNetwork, network_spec};
 use tch::{Kind, Tensor};
 
 use crate::LearnerError;
@@ -49,30 +49,6 @@ impl TrainerConfig {
             priority_eps: c.priority_eps,
         })
     }
-}
-
-/// The network `[sim]` (observation, action set) and `[learner]` (trunk,
-/// hidden sizes) describe; actors build their first network from it too.
-/// `sim.observation` must be resolved (every role does at start).
-pub fn network_spec(sim: &SimConfig, c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
-    let observation = sim.observation().ok_or_else(|| {
-        ModelError::Spec(
-            "sim.observation is unset: a role derives it from sim.scenario and \
-             sim.action_set at start (crossroads_actor::resolve_observation)"
-                .to_owned(),
-        )
-    })?;
-    let trunk = match c.trunk {
-        Trunk::Mlp => TrunkKind::Mlp,
-        Trunk::Conv => TrunkKind::Conv,
-    };
-    let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
-    Ok(NetworkSpec::new(
-        observation,
-        &sim.action_set,
-        trunk,
-        hidden,
-    )?)
 }
 
 /// What one update measured.

@@ -10,18 +10,18 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::Shutdown;
 use crossroads_config::Config;
-use crossroads_transport::convert::PublishedWeights;
+use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
+use crossroads_types::Weights;
 use parking_lot::Mutex;
 use tokio::runtime::Handle;
 use tokio::sync::{mpsc, oneshot};
 
 use crate::LearnerError;
 use crate::batch::TrainingBatch;
-use crate::broadcast::WeightsHub;
 use crate::checkpoint::{CheckpointEntry, CheckpointStore, NewCheckpoint};
 use crate::metrics::LearnerMetrics;
-use crate::sampler::{Prefetched, PriorityUpdate};
+use crate::sampler::{NewPriorities, Prefetched};
 use crate::trainer::{Trainer, TrainerConfig};
 
 /// How often idle loops look for late shared-memory subscribers.
@@ -69,8 +69,9 @@ pub struct StatusView {
 /// State shared by the training thread and the gRPC service.
 #[derive(Debug)]
 pub struct Shared {
-    /// Latest weights.
-    pub hub: WeightsHub,
+    /// The latest published weights, for the gRPC stream and
+    /// `GetLatestWeights`.
+    pub weights: WeightsSlot,
     /// Checkpoints, when enabled.
     pub store: Option<Arc<CheckpointStore>>,
     /// Training progress.
@@ -95,7 +96,7 @@ pub struct LoopInputs {
     /// Commands from the service.
     pub commands: mpsc::Receiver<Command>,
     /// Priority updates to the replay.
-    pub priorities: mpsc::Sender<PriorityUpdate>,
+    pub priorities: mpsc::Sender<NewPriorities>,
     /// Runtime for waiting on channels from this thread.
     pub handle: Handle,
     /// Stops the loop.
@@ -295,7 +296,7 @@ impl Learner {
         &mut self,
         batch: TrainingBatch,
         waited: Duration,
-        priorities: &mpsc::Sender<PriorityUpdate>,
+        priorities: &mpsc::Sender<NewPriorities>,
     ) -> Result<(), LearnerError> {
         let m = &self.shared.metrics;
         m.sample_wait.observe(waited.as_secs_f64());
@@ -306,7 +307,11 @@ impl Learner {
         m.update_seconds_total
             .inc_by(started.elapsed().as_secs_f64());
 
-        if priorities.try_send((batch.keys, stats.priorities)).is_err() {
+        let update = NewPriorities {
+            keys: batch.keys,
+            priorities: stats.priorities,
+        };
+        if priorities.try_send(update).is_err() {
             m.priority_updates_dropped.inc();
         }
 
@@ -353,20 +358,19 @@ impl Learner {
     /// Publishes the online network under the next version.
     pub fn publish(&mut self) -> Result<(), LearnerError> {
         let version = self.version + 1;
-        let bytes = self.trainer.online().to_safetensors(version)?;
-        let published_unix_ms = now_ms();
+        let weights = Weights {
+            version,
+            update_step: self.trainer.step(),
+            published_unix_ms: now_ms(),
+            spec: self.trainer.online().spec().clone(),
+            safetensors: self.trainer.online().to_safetensors(version)?,
+        };
         if let Some(shm) = &mut self.shm
-            && let Err(e) = shm.publish(version, self.trainer.step(), published_unix_ms, &bytes)
+            && let Err(e) = shm.publish(&weights)
         {
             tracing::warn!(error = %e, "publishing weights over shared memory");
         }
-        self.shared.hub.publish(PublishedWeights {
-            version,
-            update_step: self.trainer.step(),
-            spec: self.trainer.online().spec().clone(),
-            safetensors: bytes,
-            published_unix_ms,
-        });
+        self.shared.weights.offer(weights);
         self.version = version;
         self.shared.metrics.weights_version.set(version as i64);
         self.shared.metrics.weights_published.inc();

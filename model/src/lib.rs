@@ -12,13 +12,16 @@
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
 //! and PyTorch. [`DuelingMlp`] is the bare MLP variant over a caller's
-//! `VarStore`, kept for `crossroads doctor`.
+//! `VarStore`, kept for `crossroads doctor`. [`network_spec`] is the
+//! network a run's `[learner]` section describes.
 
+mod config;
 mod dueling;
 mod error;
 mod network;
 pub mod weights;
 
+pub use config::network_spec;
 pub use crossroads_types::spec::{
     self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
     num_actions_of,

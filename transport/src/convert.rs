@@ -1,26 +1,10 @@
 //! The learner's conversations in domain types, and their conversion to
 //! and from `crossroads_proto`, validating what comes in: network specs,
-//! weights ([`PublishedWeights`]) and checkpoint descriptions
+//! weights ([`Weights`]) and checkpoint descriptions
 //! ([`CheckpointSummary`]).
 
 use crossroads_proto::v1 as pb;
-use crossroads_types::{NetworkSpec, ObservationLayout, TrunkKind, WeightsMeta};
-
-/// One published version of the online network.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PublishedWeights {
-    /// Strictly increasing over the learner's life, across restores and
-    /// restarts.
-    pub version: u64,
-    /// Update step the weights come from.
-    pub update_step: u64,
-    /// The network.
-    pub spec: NetworkSpec,
-    /// safetensors bytes (with the spec and version in their metadata).
-    pub safetensors: Vec<u8>,
-    /// Unix milliseconds of publication.
-    pub published_unix_ms: i64,
-}
+use crossroads_types::{NetworkSpec, ObservationLayout, TrunkKind, Weights};
 
 /// A checkpoint as the API describes it.
 #[derive(Debug, Clone, PartialEq)]
@@ -122,7 +106,7 @@ pub fn spec_from_wire(s: pb::NetworkSpec) -> Result<NetworkSpec, String> {
 }
 
 /// Weights to the wire.
-pub fn weights_to_wire(w: &PublishedWeights) -> pb::Weights {
+pub fn weights_to_wire(w: &Weights) -> pb::Weights {
     pb::Weights {
         version: w.version,
         update_step: w.update_step,
@@ -136,20 +120,15 @@ pub fn weights_to_wire(w: &PublishedWeights) -> pb::Weights {
 /// in the safetensors metadata as in the message. Reads the safetensors
 /// header only; the tensors are checked where they are loaded
 /// (`crossroads_model::QNetwork::load_safetensors`).
-pub fn weights_from_wire(w: pb::Weights) -> Result<PublishedWeights, String> {
+pub fn weights_from_wire(w: pb::Weights) -> Result<Weights, String> {
     let spec = spec_from_wire(w.spec.ok_or("weights.spec is missing")?)?;
-    let meta = WeightsMeta::read(&w.safetensors).map_err(|e| e.to_string())?;
-    if meta.spec != spec || meta.version != w.version {
+    let weights = Weights::from_safetensors(w.safetensors, w.update_step, w.published_unix_ms)
+        .map_err(|e| e.to_string())?;
+    if weights.spec != spec || weights.version != w.version {
         return Err(format!(
             "the message says version {} of {spec:?}, its safetensors version {} of {:?}",
-            w.version, meta.version, meta.spec
+            w.version, weights.version, weights.spec
         ));
     }
-    Ok(PublishedWeights {
-        version: w.version,
-        update_step: w.update_step,
-        spec,
-        safetensors: w.safetensors,
-        published_unix_ms: w.published_unix_ms,
-    })
+    Ok(weights)
 }

@@ -1,7 +1,7 @@
 //! [`LearnerClient`]: the learner service's client, for `crossroads
 //! checkpoints`, `crossroads train` (status, evaluations) and for actors
-//! (weights). It answers in domain types ([`LearnerStatus`],
-//! [`PublishedWeights`], [`CheckpointSummary`]).
+//! (weights). It answers in domain types ([`LearnerStatus`], [`Weights`],
+//! [`CheckpointSummary`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -9,12 +9,11 @@ use std::time::Duration;
 
 use crossroads_proto::v1 as pb;
 use crossroads_proto::v1::learner_client::LearnerClient as PbClient;
+use crossroads_types::Weights;
 use crossroads_types::checkpoint::check_checkpoint_id;
 use tonic::transport::{Channel, Endpoint};
 
-use crate::convert::{
-    CheckpointSummary, PublishedWeights, checkpoint_from_wire, weights_from_wire,
-};
+use crate::convert::{CheckpointSummary, checkpoint_from_wire, weights_from_wire};
 
 /// Why a learner call failed.
 #[derive(Debug, thiserror::Error)]
@@ -245,7 +244,7 @@ impl LearnerClient {
     }
 
     /// The latest published weights.
-    pub async fn latest_weights(&self) -> Result<PublishedWeights, LearnerClientError> {
+    pub async fn latest_weights(&self) -> Result<Weights, LearnerClientError> {
         let mut c = self.inner.clone();
         let w = self
             .bounded(c.get_latest_weights(self.request(pb::GetLatestWeightsRequest {})?))
@@ -258,14 +257,14 @@ impl LearnerClient {
     pub async fn subscribe_weights(
         &self,
         have_version: u64,
-    ) -> Result<WeightsSubscription, LearnerClientError> {
+    ) -> Result<WeightsStream, LearnerClientError> {
         let mut c = self.inner.clone();
         let stream = self
             .bounded(
                 c.subscribe_weights(self.request(pb::SubscribeWeightsRequest { have_version })?),
             )
             .await?;
-        Ok(WeightsSubscription { stream })
+        Ok(WeightsStream { stream })
     }
 
     /// Downloads checkpoint `id` into `out/<id>/` (written under a
@@ -371,14 +370,14 @@ async fn next_chunk(
 
 /// A weights stream from [`LearnerClient::subscribe_weights`].
 #[derive(Debug)]
-pub struct WeightsSubscription {
+pub struct WeightsStream {
     stream: tonic::Streaming<pb::Weights>,
 }
 
-impl WeightsSubscription {
+impl WeightsStream {
     /// The next version (waits until one is published); `None` when the
     /// learner ended the stream.
-    pub async fn next(&mut self) -> Result<Option<PublishedWeights>, LearnerClientError> {
+    pub async fn next(&mut self) -> Result<Option<Weights>, LearnerClientError> {
         match self.stream.message().await? {
             Some(w) => weights_from_wire(w)
                 .map(Some)

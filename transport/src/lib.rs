@@ -8,6 +8,8 @@
 //! - [`shm`]: transition batches in iceoryx2 shared memory for actors on
 //!   the replay server's host: the `#[repr(C)]` frame, both services (the
 //!   replay server reads the frames) and [`ShmBatchPublisher`].
+//! - [`iox`]: how both iceoryx2 frame services are opened, with the
+//!   settings every side shares.
 //! - [`wire`]: the replay's messages (transition batches, samples, table
 //!   descriptions) between `crossroads_proto` and the domain, validating at
 //!   the boundary.
@@ -15,9 +17,11 @@
 //!   (weights for actors; status, evaluations and checkpoints for the CLI).
 //! - [`weights_shm`]: weights in iceoryx2 shared memory, the learner's
 //!   publisher and the subscriber of actors on its host.
-//! - [`convert`]: network specs, weights ([`PublishedWeights`]) and
-//!   checkpoint descriptions ([`CheckpointSummary`]) between
-//!   `crossroads_proto` and the domain.
+//! - [`weights_slot`]: [`WeightsSlot`], the newest
+//!   [`Weights`](crossroads_types::Weights) a process holds: the learner's
+//!   for its gRPC stream, an actor's for its network.
+//! - [`convert`]: network specs, weights and checkpoint descriptions
+//!   ([`CheckpointSummary`]) between `crossroads_proto` and the domain.
 //!
 //! Invariants the crate graph enforces: this crate links no tch (weights
 //! travel as safetensors bytes whose metadata is read from the header
@@ -31,16 +35,19 @@
 
 pub mod convert;
 pub mod grpc;
+pub mod iox;
 pub mod learner_client;
 pub mod shm;
 pub mod weights_shm;
+pub mod weights_slot;
 pub mod wire;
 
-pub use convert::{CheckpointSummary, PublishedWeights};
+pub use convert::CheckpointSummary;
 pub use grpc::{
     ClientError, InsertAck, InsertStream, JoinedActor, RateLimiterInfo, ReplayClient,
     SnapshotWritten, TableInfo,
 };
-pub use learner_client::{LearnerClient, LearnerClientError, LearnerStatus, WeightsSubscription};
+pub use learner_client::{LearnerClient, LearnerClientError, LearnerStatus, WeightsStream};
 pub use shm::{ShmBatchPublisher, ShmError};
-pub use weights_shm::{ShmWeights, ShmWeightsPublisher, ShmWeightsSubscriber};
+pub use weights_shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
+pub use weights_slot::{WeightsSlot, WeightsWatch};

@@ -36,6 +36,8 @@ use crossroads_types::batch::{
 use crossroads_types::codec::ObservationEncoding;
 use crossroads_types::columns::{Columns, ROW_BYTES};
 
+use crate::iox::{self, FrameServiceSettings, open_frame_service};
+
 /// `CRB1`, little-endian: marks a frame of this format.
 pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"CRB1");
 /// Version of the frame layout.
@@ -397,12 +399,6 @@ pub fn node() -> Result<Node<ipc::Service>, ShmError> {
         .map_err(|e| ShmError::iceoryx("creating node", e))
 }
 
-/// `name` as an iceoryx2 service name.
-pub fn iceoryx_name(name: &str) -> Result<ServiceName, ShmError> {
-    name.try_into()
-        .map_err(|e| ShmError::iceoryx("service name", e))
-}
-
 /// Opens (or creates) the insert service of `table`, with the settings both
 /// sides share: no history, no overflow (a full queue pushes back on the
 /// publisher instead of dropping batches), `shm_buffer` batches queued.
@@ -411,18 +407,16 @@ pub fn open_batch_service(
     config: &TransportConfig,
     table: &str,
 ) -> Result<PortFactory<ipc::Service, [u8], BatchFrameHeader>, ShmError> {
-    let name = iceoryx_name(&service_name(&config.shm_prefix, table))?;
-    node.service_builder(&name)
-        .publish_subscribe::<[u8]>()
-        .user_header::<BatchFrameHeader>()
-        .enable_safe_overflow(false)
-        .history_size(0)
-        .subscriber_max_buffer_size(config.shm_buffer)
-        .subscriber_max_borrowed_samples(4)
-        .max_publishers(config.shm_max_publishers)
-        .max_subscribers(4)
-        .open_or_create()
-        .map_err(|e| ShmError::iceoryx("opening service", e))
+    let settings = FrameServiceSettings {
+        safe_overflow: false,
+        history: 0,
+        subscriber_buffer: config.shm_buffer,
+        borrowed_samples: 4,
+        max_publishers: config.shm_max_publishers,
+        max_subscribers: 4,
+    };
+    let name = service_name(&config.shm_prefix, table);
+    open_frame_service(node, &name, settings, "opening service")
 }
 
 /// Opens (or creates) the acknowledgement service of `table`: one server
@@ -433,7 +427,7 @@ pub fn open_ack_service(
     config: &TransportConfig,
     table: &str,
 ) -> Result<PortFactory<ipc::Service, ShmInsertAck, ()>, ShmError> {
-    let name = iceoryx_name(&ack_service_name(&config.shm_prefix, table))?;
+    let name = iox::service_name(&ack_service_name(&config.shm_prefix, table))?;
     node.service_builder(&name)
         .publish_subscribe::<ShmInsertAck>()
         .enable_safe_overflow(true)

@@ -12,12 +12,14 @@
 use std::fmt;
 
 use crossroads_config::TransportConfig;
+use crossroads_types::Weights;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
+use crate::iox::{FrameServiceSettings, open_frame_service};
 use crate::shm::{ShmError, node};
 
 /// `CRW1`, little-endian: marks a weights frame.
@@ -51,22 +53,16 @@ pub fn open_weights_service(
     node: &Node<ipc::Service>,
     config: &TransportConfig,
 ) -> Result<PortFactory<ipc::Service, [u8], WeightsFrameHeader>, ShmError> {
+    let settings = FrameServiceSettings {
+        safe_overflow: true,
+        history: 1,
+        subscriber_buffer: 1,
+        borrowed_samples: 1,
+        max_publishers: 1,
+        max_subscribers: config.shm_max_publishers,
+    };
     let name = service_name(&config.shm_prefix);
-    let name: ServiceName = name
-        .as_str()
-        .try_into()
-        .map_err(|e| ShmError::iceoryx("service name", e))?;
-    node.service_builder(&name)
-        .publish_subscribe::<[u8]>()
-        .user_header::<WeightsFrameHeader>()
-        .enable_safe_overflow(true)
-        .history_size(1)
-        .subscriber_max_buffer_size(1)
-        .subscriber_max_borrowed_samples(1)
-        .max_publishers(1)
-        .max_subscribers(config.shm_max_publishers)
-        .open_or_create()
-        .map_err(|e| ShmError::iceoryx("opening weights service", e))
+    open_frame_service(node, &name, settings, "opening weights service")
 }
 
 /// The learner's side. Not `Send`: created and used by the training
@@ -111,25 +107,19 @@ impl ShmWeightsPublisher {
     }
 
     /// Publishes one version; returns the number of subscribers reached.
-    pub fn publish(
-        &mut self,
-        weights_version: u64,
-        update_step: u64,
-        published_unix_ms: i64,
-        safetensors: &[u8],
-    ) -> Result<usize, ShmError> {
+    pub fn publish(&mut self, weights: &Weights) -> Result<usize, ShmError> {
         let mut sample = self
             .publisher
-            .loan_slice(safetensors.len())
+            .loan_slice(weights.safetensors.len())
             .map_err(|e| ShmError::iceoryx("loaning a weights slot", e))?;
         *sample.user_header_mut() = WeightsFrameHeader {
             magic: WEIGHTS_MAGIC,
             frame_version: 1,
-            weights_version,
-            update_step,
-            published_unix_ms,
+            weights_version: weights.version,
+            update_step: weights.update_step,
+            published_unix_ms: weights.published_unix_ms,
         };
-        sample.payload_mut().copy_from_slice(safetensors);
+        sample.payload_mut().copy_from_slice(&weights.safetensors);
         sample
             .send()
             .map_err(|e| ShmError::iceoryx("sending weights", e))
@@ -142,21 +132,6 @@ impl ShmWeightsPublisher {
             tracing::debug!(error = ?e, "updating weights subscribers");
         }
     }
-}
-
-/// One version received over shared memory.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ShmWeights {
-    /// Weights version.
-    pub version: u64,
-    /// Update step.
-    pub update_step: u64,
-    /// Unix milliseconds of publication.
-    pub published_unix_ms: i64,
-    /// The safetensors bytes (load with
-    /// `crossroads_model::QNetwork::load_safetensors`, which checks the
-    /// spec).
-    pub safetensors: Vec<u8>,
 }
 
 /// An actor's side: polls for the newest weights. Not `Send`.
@@ -191,10 +166,12 @@ impl ShmWeightsSubscriber {
         })
     }
 
-    /// The newest weights received since the last call, if any; frames that
-    /// are not valid weights frames are skipped with a warning.
-    pub fn latest(&mut self) -> Result<Option<ShmWeights>, ShmError> {
-        let mut newest: Option<ShmWeights> = None;
+    /// The newest weights received since the last call, if any. Frames
+    /// that are not valid weights frames, and weights whose safetensors
+    /// metadata (read from the header only) do not say the frame's version,
+    /// are skipped with a warning.
+    pub fn latest(&mut self) -> Result<Option<Weights>, ShmError> {
+        let mut newest: Option<(WeightsFrameHeader, Vec<u8>)> = None;
         while let Some(sample) = self
             .subscriber
             .receive()
@@ -207,16 +184,28 @@ impl ShmWeightsSubscriber {
             }
             if newest
                 .as_ref()
-                .is_none_or(|n| h.weights_version > n.version)
+                .is_none_or(|(n, _)| h.weights_version > n.weights_version)
             {
-                newest = Some(ShmWeights {
-                    version: h.weights_version,
-                    update_step: h.update_step,
-                    published_unix_ms: h.published_unix_ms,
-                    safetensors: sample.payload().to_vec(),
-                });
+                newest = Some((h, sample.payload().to_vec()));
             }
         }
-        Ok(newest)
+        let Some((h, safetensors)) = newest else {
+            return Ok(None);
+        };
+        match Weights::from_safetensors(safetensors, h.update_step, h.published_unix_ms) {
+            Ok(w) if w.version == h.weights_version => Ok(Some(w)),
+            Ok(w) => {
+                tracing::warn!(
+                    frame = h.weights_version,
+                    metadata = w.version,
+                    "skipping weights whose frame and metadata disagree on the version"
+                );
+                Ok(None)
+            }
+            Err(e) => {
+                tracing::warn!(version = h.weights_version, error = %e, "skipping unreadable weights");
+                Ok(None)
+            }
+        }
     }
 }

@@ -14,8 +14,9 @@
 //! - [`spec`]: what a Q-network is ([`NetworkSpec`]: the
 //!   [`ObservationLayout`] it reads, the action set it scores, its
 //!   [`TrunkKind`]).
-//! - [`weights`]: the metadata of a weights file ([`WeightsMeta`]), read
-//!   from the safetensors header without building a tensor.
+//! - [`weights`]: one published version of the network ([`Weights`]) and
+//!   the metadata of a weights file ([`WeightsMeta`]), read from the
+//!   safetensors header without building a tensor.
 //! - [`checkpoint`]: which names a checkpoint may have.
 //!
 //! Invariant, enforced by the crate graph: this crate depends on no tensor
@@ -42,4 +43,4 @@ pub use sample::{PrioritiesUpdated, Sample};
 pub use spec::{
     EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
 };
-pub use weights::WeightsMeta;
+pub use weights::{Weights, WeightsMeta};

@@ -12,7 +12,8 @@
 //!
 //! [`WeightsMeta::read`] reads and checks the metadata of a file from its
 //! header alone, building no tensor; writing and loading the tensors is
-//! `crossroads_model::weights`.
+//! `crossroads_model::weights`. [`Weights`] is one version as the learner
+//! publishes it, the transports carry it and actors apply it.
 
 use std::collections::HashMap;
 
@@ -90,6 +91,44 @@ impl WeightsMeta {
     }
 }
 
+/// One published version of the learner's online network: what the
+/// learner broadcasts, gRPC and iceoryx2 carry, and actors apply.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Weights {
+    /// Strictly increasing over the learner's life, across restores and
+    /// restarts.
+    pub version: u64,
+    /// Learner update step the weights come from.
+    pub update_step: u64,
+    /// Unix milliseconds of publication (for staleness).
+    pub published_unix_ms: i64,
+    /// The network they belong to.
+    pub spec: NetworkSpec,
+    /// safetensors bytes, with the same version and spec in their metadata
+    /// (load with `crossroads_model::QNetwork::load_safetensors`, which
+    /// checks the tensors).
+    pub safetensors: Vec<u8>,
+}
+
+impl Weights {
+    /// Weights from safetensors bytes, taking version and spec from their
+    /// metadata (read from the header only; no tensor is checked).
+    pub fn from_safetensors(
+        safetensors: Vec<u8>,
+        update_step: u64,
+        published_unix_ms: i64,
+    ) -> Result<Self, SpecError> {
+        let meta = WeightsMeta::read(&safetensors)?;
+        Ok(Self {
+            version: meta.version,
+            update_step,
+            published_unix_ms,
+            spec: meta.spec,
+            safetensors,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -110,7 +149,18 @@ mod tests {
             spec: NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![16]).expect("spec"),
         };
         let bytes = file(&meta.to_metadata().expect("metadata"));
-        assert_eq!(WeightsMeta::read(&bytes), Ok(meta));
+        assert_eq!(WeightsMeta::read(&bytes), Ok(meta.clone()));
+        let weights = Weights::from_safetensors(bytes.clone(), 70, 5).expect("weights");
+        assert_eq!(
+            weights,
+            Weights {
+                version: 7,
+                update_step: 70,
+                published_unix_ms: 5,
+                spec: meta.spec,
+                safetensors: bytes,
+            }
+        );
     }
 
     #[test]

@@ -37,15 +37,10 @@ impl ActionValues for LinearValues {
         self.bias.len()
     }
 
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), ValuesError> {
+    fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError> {
         self.calls += 1;
         let a = self.bias.len();
-        for (row, q) in observations
+        for (row, q) in obs
             .chunks_exact(self.obs_len)
             .take(n)
             .zip(out.chunks_exact_mut(a))

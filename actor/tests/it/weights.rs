@@ -9,12 +9,14 @@ use std::time::Duration;
 
 use crossroads_actor::{
     ActionValues, Actor, ActorMetrics, ActorSettings, LiveNetwork, PushConfig, Pusher, RunReport,
-    WeightsSlot, WeightsSubscription, WeightsUpdate,
+    WeightsSubscription,
 };
 use crossroads_common::Shutdown;
 use crossroads_config::{ActorTransport, Config, SimConfig};
 use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
+use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
+use crossroads_types::Weights;
 
 use crate::util::{actor_config, eventually, replay_config, transport, unique_prefix};
 
@@ -205,8 +207,9 @@ async fn a_running_actor_takes_newer_weights_from_shared_memory() {
             let bytes = net.to_safetensors(0).expect("bytes").len();
             let mut publisher = ShmWeightsPublisher::new(&connection, bytes).expect("publisher");
             while let Ok(v) = rx.recv() {
-                let w = net.to_safetensors(v).expect("weights");
-                publisher.publish(v, v * 10, 0, &w).expect("publish");
+                let w = Weights::from_safetensors(net.to_safetensors(v).expect("bytes"), v * 10, 0)
+                    .expect("weights");
+                publisher.publish(&w).expect("publish");
                 published.store(true, Ordering::SeqCst);
                 // Late subscribers are connected on the next update.
                 for _ in 0..50 {
@@ -250,12 +253,7 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
         .expect("network")
         .to_safetensors(4)
         .expect("bytes");
-    assert!(slot.offer(WeightsUpdate {
-        version: 4,
-        update_step: 40,
-        published_unix_ms: 0,
-        safetensors: bytes,
-    }));
+    assert!(slot.offer(Weights::from_safetensors(bytes, 40, 0).expect("weights")));
     let err = actor.step(&mut live).expect_err("mismatched weights");
     let text = err.to_string();
     assert!(text.contains("weights version 4"), "{text}");
@@ -265,27 +263,15 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
     // Weights of another architecture for the same environments replace
     // the network; an older version offered later is ignored.
     let wider = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![16]).expect("spec");
-    let bytes = QNetwork::new(wider.clone(), 5)
-        .expect("network")
-        .to_safetensors(6)
-        .expect("bytes");
-    assert!(slot.offer(WeightsUpdate {
-        version: 6,
-        update_step: 60,
-        published_unix_ms: 0,
-        safetensors: bytes.clone(),
-    }));
+    let net = QNetwork::new(wider.clone(), 5).expect("network");
+    let bytes = |version| net.to_safetensors(version).expect("bytes");
+    assert!(slot.offer(Weights::from_safetensors(bytes(6), 60, 0).expect("weights")));
     actor
         .step(&mut live)
         .expect("step with the learner's network");
     assert_eq!(live.version(), 6);
     assert_eq!(live.network().spec(), &wider);
-    assert!(!slot.offer(WeightsUpdate {
-        version: 5,
-        update_step: 50,
-        published_unix_ms: 0,
-        safetensors: bytes,
-    }));
+    assert!(!slot.offer(Weights::from_safetensors(bytes(5), 50, 0).expect("weights")));
     assert_eq!(slot.version(), 6);
     assert_eq!(live.obs_len(), actor.envs().obs_len());
 }

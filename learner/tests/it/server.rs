@@ -299,27 +299,40 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
 
 #[test]
 fn weights_reach_a_late_shared_memory_subscriber() {
+    use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
     use crossroads_transport::weights_shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
+    use crossroads_types::Weights;
     let transport = crossroads_config::TransportConfig {
         shm_prefix: format!("crossroads-test-{}-weights", std::process::id()),
         ..Default::default()
     };
-    let mut publisher = ShmWeightsPublisher::new(&transport, 1024).unwrap();
-    publisher.publish(1, 10, 123, &[1, 2, 3]).unwrap();
-    publisher.publish(2, 20, 456, &[4, 5, 6, 7]).unwrap();
+    let weights = |version: u64, hidden: i64| {
+        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![hidden]).unwrap();
+        let bytes = QNetwork::new(spec, 1)
+            .unwrap()
+            .to_safetensors(version)
+            .unwrap();
+        Weights::from_safetensors(bytes, version * 10, 100 + version as i64).unwrap()
+    };
+    let (first, second) = (weights(1, 2), weights(2, 2));
+    let mut publisher = ShmWeightsPublisher::new(&transport, first.safetensors.len()).unwrap();
+    publisher.publish(&first).unwrap();
+    publisher.publish(&second).unwrap();
     let mut subscriber = ShmWeightsSubscriber::new(&transport).unwrap();
     publisher.update_connections();
     let got = subscriber
         .latest()
         .unwrap()
         .expect("history delivers the latest");
-    assert_eq!(
-        (got.version, got.update_step, got.safetensors),
-        (2, 20, vec![4, 5, 6, 7])
-    );
+    assert_eq!(got, second);
     // A larger payload than the first slot grows it.
-    let big = vec![9u8; 5000];
-    publisher.publish(3, 30, 789, &big).unwrap();
-    let got = subscriber.latest().unwrap().unwrap();
-    assert_eq!((got.version, got.safetensors.len()), (3, 5000));
+    let big = weights(3, 16);
+    assert!(big.safetensors.len() > 4 * second.safetensors.len());
+    publisher.publish(&big).unwrap();
+    assert_eq!(subscriber.latest().unwrap(), Some(big));
+    // A frame whose version is not the one its metadata say is skipped.
+    let mut wrong = weights(4, 2);
+    wrong.version = 5;
+    publisher.publish(&wrong).unwrap();
+    assert_eq!(subscriber.latest().unwrap(), None);
 }

@@ -10,17 +10,14 @@
 //! buffer is full), not as a backlog that is never timed.
 
 use std::process::ExitCode;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use crossroads_actor::{
-    ActionValues, Actor, ActorMetrics, ActorSettings, PushConfig, Pusher, hostname,
-};
+use crossroads_actor::{ActorMetrics, ActorParts, PushConfig, Pusher, hostname};
 use crossroads_common::Shutdown;
 use crossroads_config::{ActorTransport, Config};
 use crossroads_learner::bench::median;
-use crossroads_model::QNetwork;
 use crossroads_replay::{PreparedBatch, Table};
 use serde::Serialize;
 
@@ -54,36 +51,6 @@ struct Cell {
     inference_fraction: f64,
     dropped: u64,
     rounds: Vec<f64>,
-}
-
-/// A network that times its forward passes.
-struct Timed {
-    net: QNetwork,
-    busy: Duration,
-    calls: u64,
-}
-
-impl ActionValues for Timed {
-    fn obs_len(&self) -> usize {
-        ActionValues::obs_len(&self.net)
-    }
-
-    fn num_actions(&self) -> usize {
-        ActionValues::num_actions(&self.net)
-    }
-
-    fn q_values(
-        &mut self,
-        observations: &[f32],
-        n: usize,
-        out: &mut [f32],
-    ) -> Result<(), crossroads_actor::ValuesError> {
-        let start = Instant::now();
-        let r = ActionValues::q_values(&mut self.net, observations, n, out);
-        self.busy += start.elapsed();
-        self.calls += 1;
-        r
-    }
 }
 
 /// Where the acting thread puts its batches.
@@ -124,7 +91,7 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
             cells.push(cell);
         }
     }
-    let spec = crossroads_learner::network_spec(&config.sim, &config.learner)?;
+    let spec = crossroads_model::network_spec(&config.sim, &config.learner)?;
     let network = describe_network(&spec);
     let load = load_average();
     if o.json {
@@ -194,15 +161,14 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         .table(&c.replay.table)
         .context("the replay server has no table")?;
 
+    // The actor a process runs (its live network, never sent newer
+    // weights here, times its forward passes in the metrics).
     let metrics = ActorMetrics::new(None, &c.sim.scenario)?;
-    let settings = ActorSettings::from_config(&c.sim, &c.actor, 0)?;
-    let mut actor = Actor::new(settings, metrics.clone())?;
-    let spec = crossroads_learner::network_spec(&c.sim, &c.learner)?;
-    let mut net = Timed {
-        net: QNetwork::new(spec, c.learner.seed)?,
-        busy: Duration::ZERO,
-        calls: 0,
-    };
+    let ActorParts {
+        mut actor,
+        mut network,
+        ..
+    } = ActorParts::new(&c, 0, metrics.clone())?;
     let sink = match transport {
         "inproc" => Sink::Table(Arc::clone(&table)),
         kind => {
@@ -221,11 +187,9 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
 
     let stop = Shutdown::new();
     let acting_stop = stop.clone();
-    let marks = Arc::new(Mutex::new((Duration::ZERO, 0u64)));
-    let acting_marks = Arc::clone(&marks);
     let acting = tokio::task::spawn_blocking(move || -> anyhow::Result<Sink> {
         while !acting_stop.is_triggered() {
-            actor.step(&mut net)?;
+            actor.step(&mut network)?;
             while let Some(batch) = actor.take_batch() {
                 match &sink {
                     Sink::Table(t) => {
@@ -234,7 +198,6 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
                     Sink::Pusher(p) => p.push(batch),
                 }
             }
-            *lock(&acting_marks) = (net.busy, net.calls);
         }
         Ok(sink)
     });
@@ -247,22 +210,28 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
     let mut inference = Vec::new();
     let dropped0 = metrics.dropped_total("buffer_full");
     for _ in 0..o.rounds.max(1) {
-        let (t0, i0, s0, (b0, c0)) = (
+        let passes_and_busy = || {
+            (
+                metrics.forward_passes_total(),
+                metrics.inference_seconds_total(),
+            )
+        };
+        let (t0, i0, s0, (c0, b0)) = (
             Instant::now(),
             table.stats().inserts_total,
             metrics.env_steps_total(),
-            *lock(&marks),
+            passes_and_busy(),
         );
         tokio::time::sleep(round).await;
         if acting.is_finished() {
             break;
         }
         let dt = t0.elapsed().as_secs_f64();
-        let (b1, c1) = *lock(&marks);
+        let (c1, b1) = passes_and_busy();
         rates.push((table.stats().inserts_total - i0) as f64 / dt);
         steps.push((metrics.env_steps_total() - s0) as f64 / dt);
         passes.push((c1 - c0) as f64 / dt);
-        inference.push((b1 - b0).as_secs_f64() / dt);
+        inference.push((b1 - b0) / dt);
     }
     stop.trigger();
     let sink = acting.await.context("the acting thread")??;
@@ -282,8 +251,4 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         dropped: metrics.dropped_total("buffer_full") - dropped0,
         rounds: rates,
     })
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }

@@ -1,0 +1,31 @@
+//! The network a run's configuration describes.
+
+use crossroads_config::{LearnerConfig, SimConfig, Trunk};
+
+use crate::ModelError;
+use crate::spec::{NetworkSpec, TrunkKind};
+
+/// The network `[sim]` (observation, action set) and `[learner]` (trunk,
+/// hidden sizes) describe: the learner trains it and actors start from it,
+/// built with `learner.seed`. `sim.observation` must be resolved (every
+/// role does at start, `crossroads_actor::resolve_observation`).
+pub fn network_spec(sim: &SimConfig, c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
+    let observation = sim.observation().ok_or_else(|| {
+        ModelError::Spec(
+            "sim.observation is unset: a role derives it from sim.scenario and \
+             sim.action_set at start (crossroads_actor::resolve_observation)"
+                .to_owned(),
+        )
+    })?;
+    let trunk = match c.trunk {
+        Trunk::Mlp => TrunkKind::Mlp,
+        Trunk::Conv => TrunkKind::Conv,
+    };
+    let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
+    Ok(NetworkSpec::new(
+        observation,
+        &sim.action_set,
+        trunk,
+        hidden,
+    )?)
+}
