@@ -32,9 +32,12 @@ run: build
 deploydeps:
 	@scripts/setup-deploy.sh
 
+# Every test: the slow trainings too (CROSSROADS_SLOW_TESTS=1), and those
+# that need Python, Docker or SUMO (ignored by plain `cargo test`), which
+# fail here when their tool is missing (CROSSROADS_REQUIRE_*=1).
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
-	CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 $(CARGO) test --workspace --all-targets --no-fail-fast
+	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 $(CARGO) test --workspace --all-targets --no-fail-fast -- --include-ignored
 	$(CARGO) test --workspace --doc
 
 lint: setup

@@ -24,6 +24,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Learner(args) => args.apply(cli.global.loader()),
         Command::Actor(args) => args.apply(cli.global.loader()),
         Command::Train(args) => args.loader(&cli.global),
+        Command::Doctor(_) => commands::doctor::loader(&cli.global),
         _ => cli.global.loader(),
     };
     let mut config = loader.load().context("loading configuration")?;
@@ -43,7 +44,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     }
     match cli.command {
         Command::Config(args) => commands::config::run(&cli.global, &config, &args),
-        Command::Doctor(args) => commands::doctor::run(&config, &args),
+        Command::Doctor(args) => commands::doctor::run(&cli.global, &config, &args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::Health(args) => commands::health::run(&config, &args),
         Command::TuneTtc(args) => commands::tune_ttc::run(&args),

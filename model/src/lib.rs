@@ -11,12 +11,10 @@
 //! [`QNetwork::q_values`] the differentiable forward pass the learner trains.
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
-//! and PyTorch. [`DuelingMlp`] is the bare MLP variant over a caller's
-//! `VarStore`, kept for `crossroads doctor`. [`network_spec`] is the
-//! network a run's `[learner]` section describes.
+//! and PyTorch. [`network_spec`] is the network a run's `[sim]` and
+//! `[learner]` sections describe.
 
 mod config;
-mod dueling;
 mod error;
 mod network;
 pub mod weights;
@@ -26,7 +24,6 @@ pub use crossroads_types::spec::{
     self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
     num_actions_of,
 };
-pub use dueling::{DuelingMlp, MlpSpec};
 pub use error::ModelError;
 pub use network::{QBatch, QNetwork};
 pub use weights::WeightsMeta;

@@ -1,6 +1,6 @@
 //! A forward pass through libtorch on CPU with known weights.
 
-use crossroads_model::{DuelingMlp, MlpSpec};
+use crossroads_model::{NetworkSpec, ObservationLayout, QNetwork, TrunkKind};
 use tch::{Device, Kind, Tensor, nn};
 
 fn set(vs: &nn::VarStore, name: &str, values: &[f32], shape: &[i64]) {
@@ -14,30 +14,42 @@ fn set(vs: &nn::VarStore, name: &str, values: &[f32], shape: &[i64]) {
     });
 }
 
+/// An MLP over `inputs` plain values (no grid, no ego features).
+fn plain_mlp(inputs: i64, hidden: Vec<i64>, num_actions: i64) -> NetworkSpec {
+    NetworkSpec {
+        observation: ObservationLayout {
+            kind: "plain".to_owned(),
+            channels: 1,
+            rows: 1,
+            cols: inputs,
+            extra: 0,
+        },
+        action_set: "plain".to_owned(),
+        num_actions,
+        trunk: TrunkKind::Mlp,
+        hidden,
+    }
+}
+
 #[test]
 fn dueling_forward_matches_hand_computation() {
-    let vs = nn::VarStore::new(Device::Cpu);
-    let spec = MlpSpec {
-        input: 2,
-        hidden: vec![2],
-        num_actions: 3,
-    };
-    let net = DuelingMlp::new(&vs.root(), spec).expect("valid spec");
+    let net = QNetwork::new(plain_mlp(2, vec![2], 3), 0).expect("valid spec");
+    let vs = net.var_store();
 
     // trunk: h = relu(W x + b) with W = [[1, 2], [-1, 1]], b = [0, 0.5]
-    set(&vs, "trunk.0.weight", &[1.0, 2.0, -1.0, 1.0], &[2, 2]);
-    set(&vs, "trunk.0.bias", &[0.0, 0.5], &[2]);
+    set(vs, "trunk.0.weight", &[1.0, 2.0, -1.0, 1.0], &[2, 2]);
+    set(vs, "trunk.0.bias", &[0.0, 0.5], &[2]);
     // value: V = [0.5, -1] . h + 1
-    set(&vs, "value.weight", &[0.5, -1.0], &[1, 2]);
-    set(&vs, "value.bias", &[1.0], &[1]);
+    set(vs, "value.weight", &[0.5, -1.0], &[1, 2]);
+    set(vs, "value.bias", &[1.0], &[1]);
     // advantage: A = [[1, 0], [0, 1], [1, 1]] h + [0, 0, -3]
     set(
-        &vs,
+        vs,
         "advantage.weight",
         &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0],
         &[3, 2],
     );
-    set(&vs, "advantage.bias", &[0.0, 0.0, -3.0], &[3]);
+    set(vs, "advantage.bias", &[0.0, 0.0, -3.0], &[3]);
 
     // x = [1, 1]:  h = relu([3, 0.5]) = [3, 0.5]; V = 1.5 - 0.5 + 1 = 2
     //   A = [3, 0.5, 0.5], mean 4/3; Q = 2 + A - 4/3 = [11/3, 7/6, 7/6]
@@ -52,17 +64,16 @@ fn dueling_forward_matches_hand_computation() {
     for (g, w) in got.iter().zip(want) {
         assert!((g - w).abs() < 1e-5, "got {got:?}, want {want:?}");
     }
+    // Inference (the actors' call) gives the same values.
+    let batch = net.infer(&[1.0, 1.0, 2.0, -1.0], 2).expect("infer");
+    for (g, w) in batch.row(0).iter().chain(batch.row(1)).zip(want) {
+        assert!((g - w).abs() < 1e-5, "infer: got {g}, want {w}");
+    }
 }
 
 #[test]
 fn wrong_input_shape_is_an_error_naming_the_shape() {
-    let vs = nn::VarStore::new(Device::Cpu);
-    let spec = MlpSpec {
-        input: 4,
-        hidden: vec![8],
-        num_actions: 5,
-    };
-    let net = DuelingMlp::new(&vs.root(), spec).expect("valid spec");
+    let net = QNetwork::new(plain_mlp(4, vec![8], 5), 0).expect("valid spec");
     let err = net
         .q_values(&Tensor::zeros([3, 7], (Kind::Float, Device::Cpu)))
         .expect_err("7 features instead of 4");
@@ -72,13 +83,8 @@ fn wrong_input_shape_is_an_error_naming_the_shape() {
 
 #[test]
 fn zero_width_spec_is_rejected() {
-    let vs = nn::VarStore::new(Device::Cpu);
-    let spec = MlpSpec {
-        input: 4,
-        hidden: vec![0],
-        num_actions: 5,
-    };
-    assert!(DuelingMlp::new(&vs.root(), spec).is_err());
+    let err = QNetwork::new(plain_mlp(4, vec![0], 5), 0).expect_err("a layer of width 0");
+    assert!(err.to_string().contains("hidden sizes"), "{err}");
 }
 
 mod qnetwork {

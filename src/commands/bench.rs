@@ -109,7 +109,7 @@ fn replay(capacity: usize, rounds: usize, json: bool) {
 }
 
 /// `dueling mlp 2344-256-256 -> 5`: a network in one line.
-fn describe_network(spec: &crossroads_model::NetworkSpec) -> String {
+pub(crate) fn describe_network(spec: &crossroads_model::NetworkSpec) -> String {
     let hidden: Vec<String> = spec.hidden.iter().map(i64::to_string).collect();
     format!(
         "dueling {} {}-{} -> {}",

@@ -1,14 +1,29 @@
-//! `crossroads doctor`: what this machine offers the training service.
+//! `crossroads doctor`: what this machine offers the training service, and
+//! how fast it runs the network a run would train: the one the loaded
+//! configuration's `[learner]` section describes, over the observation its
+//! scenario and action set produce (as `crossroads train` derives it), at
+//! the actor's batch (`actor.envs`) and the learner's (`learner.batch_size`).
+//! Without `--config` or `--experiment` that is the built-in experiment
+//! `crossroads train` trains by default.
 
 use std::process::ExitCode;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use crossroads_config::Config;
-use crossroads_model::{DuelingMlp, MlpSpec};
+use anyhow::Context;
+use crossroads_config::{Config, ConfigLoader, SimConfig};
+use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second};
+use crossroads_model::{NetworkSpec, QNetwork};
 use serde::Serialize;
-use tch::{Device, Kind, Tensor, nn};
+use tch::Tensor;
 
-use crate::cli::DoctorArgs;
+use crate::cli::{DoctorArgs, GlobalArgs};
+
+/// The built-in experiment `crossroads train` trains without flags (DQN-TTG
+/// on left), the base of `crossroads doctor` without a file.
+const DEFAULT_EXPERIMENT: &str = "ttg-left";
+
+/// Timed calls per figure, after as many untimed ones.
+const CALLS: usize = 50;
 
 #[derive(Debug, Serialize)]
 struct Report {
@@ -18,16 +33,66 @@ struct Report {
     cuda_available: bool,
     mkl: bool,
     openmp: bool,
-    /// Median of timed forward passes of a 468-input dueling MLP at batch 64.
-    forward_batch64_median_ms: f64,
+    /// The network timed, in one line (`dueling conv 2344-16-32-256 -> 5`).
+    network: String,
+    /// Where its settings came from: the configuration file and the
+    /// built-in experiment under it (`--set` and the environment aside).
+    config: String,
+    /// Observations per actor inference call (`actor.envs`).
+    actor_batch: usize,
+    /// Median of timed inference calls at `actor_batch`.
+    actor_forward_median_ms: f64,
+    /// Transitions per learner update (`learner.batch_size`).
+    learner_batch: u32,
+    /// Median of timed forward passes (no gradient) at `learner_batch`.
+    learner_forward_median_ms: f64,
+    /// One update (forward, double DQN targets, backward, optimizer step)
+    /// at `learner_batch`, from the median of three rounds' rates.
+    learner_update_median_ms: f64,
+}
+
+/// The configuration layers of `crossroads doctor`: the global ones, over
+/// the experiment `crossroads train` trains by default when no file or
+/// experiment is named.
+pub fn loader(global: &GlobalArgs) -> ConfigLoader {
+    let loader = global.loader();
+    match default_experiment(global) {
+        Some(e) => loader.base(format!("built-in experiment {}", e.name), e.toml),
+        None => loader,
+    }
+}
+
+/// [`DEFAULT_EXPERIMENT`] when neither `--config` nor `--experiment` is
+/// given.
+fn default_experiment(global: &GlobalArgs) -> Option<crate::experiments::Experiment> {
+    if global.config.is_some() || global.experiment.is_some() {
+        return None;
+    }
+    crate::experiments::named(DEFAULT_EXPERIMENT)
 }
 
 /// Prints the report.
-pub fn run(config: &Config, args: &DoctorArgs) -> anyhow::Result<ExitCode> {
+pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::Result<ExitCode> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     if config.runtime.compute_threads > 0 {
         tch::set_num_threads(config.runtime.compute_threads as i32);
     }
+    let (sim, spec) = network(config)?;
+    let learner = &config.learner;
+    let experiment = default_experiment(global)
+        .map(|e| e.name)
+        .or(global.experiment.as_deref());
+    let source = match (experiment, &global.config) {
+        (Some(e), None) => format!("built-in experiment {e}"),
+        (Some(e), Some(file)) => format!("{} over built-in experiment {e}", file.display()),
+        (None, Some(file)) => file.display().to_string(),
+        (None, None) => "built-in defaults".to_owned(),
+    };
+    let net = QNetwork::new(spec.clone(), learner.seed).context("building the network")?;
+    let actor_batch = config.actor.envs;
+    let learner_batch = learner.batch_size;
+    let update = updates_per_second(&sim, learner, 3, Duration::from_millis(300))
+        .context("timing learner updates")?;
     let report = Report {
         version: env!("CARGO_PKG_VERSION"),
         cores,
@@ -35,7 +100,13 @@ pub fn run(config: &Config, args: &DoctorArgs) -> anyhow::Result<ExitCode> {
         cuda_available: tch::Cuda::is_available(),
         mkl: tch::utils::has_mkl(),
         openmp: tch::utils::has_openmp(),
-        forward_batch64_median_ms: time_forward()?,
+        network: super::bench::describe_network(&spec),
+        config: source,
+        actor_batch,
+        actor_forward_median_ms: time_inference(&net, actor_batch)?,
+        learner_batch,
+        learner_forward_median_ms: time_forward(&net, learner_batch as usize)?,
+        learner_update_median_ms: 1e3 / update.updates_per_sec,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -45,33 +116,72 @@ pub fn run(config: &Config, args: &DoctorArgs) -> anyhow::Result<ExitCode> {
         println!("  torch threads    {}", report.torch_threads);
         println!("  CUDA available   {}", report.cuda_available);
         println!("  MKL / OpenMP     {} / {}", report.mkl, report.openmp);
+        println!("  network          {} ({})", report.network, report.config);
         println!(
-            "  forward pass     {:.3} ms median (dueling MLP 468-256-256, batch 64)",
-            report.forward_batch64_median_ms
+            "  actor forward    {:.3} ms median (batch {}, actor.envs)",
+            report.actor_forward_median_ms, report.actor_batch
+        );
+        println!(
+            "  learner forward  {:.3} ms median (batch {}, learner.batch_size)",
+            report.learner_forward_median_ms, report.learner_batch
+        );
+        println!(
+            "  learner update   {:.3} ms median (batch {})",
+            report.learner_update_median_ms, report.learner_batch
         );
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn time_forward() -> anyhow::Result<f64> {
-    let vs = nn::VarStore::new(Device::Cpu);
-    let spec = MlpSpec {
-        input: 18 * 26,
-        hidden: vec![256, 256],
-        num_actions: 5,
-    };
-    let net = DuelingMlp::new(&vs.root(), spec)?;
-    let x = Tensor::rand([64, 18 * 26], (Kind::Float, Device::Cpu));
-    let mut times = Vec::with_capacity(50);
-    tch::no_grad(|| -> anyhow::Result<()> {
-        for _ in 0..55 {
-            let start = Instant::now();
-            let _q = net.q_values(&x)?;
-            times.push(start.elapsed().as_secs_f64() * 1e3);
-        }
+/// The network a run of `config` trains, and its `[sim]` with the
+/// observation resolved (what the run's actors produce).
+fn network(config: &Config) -> anyhow::Result<(SimConfig, NetworkSpec)> {
+    let mut sim = config.sim.clone();
+    crossroads_actor::resolve_observation(&mut sim).context("[sim]")?;
+    let spec =
+        crossroads_model::network_spec(&sim, &config.learner).context("the [learner] network")?;
+    Ok((sim, spec))
+}
+
+/// `batch` synthetic observations of `spec`, back to back.
+fn observations(spec: &NetworkSpec, batch: usize) -> Vec<f32> {
+    let mut rng = SplitMix::new(11);
+    (0..batch)
+        .flat_map(|_| synthetic_observation(spec, &mut rng))
+        .collect()
+}
+
+/// Median milliseconds of `f` over [`CALLS`] calls, after as many untimed.
+fn median_ms(mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
+    for _ in 0..CALLS {
+        f()?;
+    }
+    let mut times = Vec::with_capacity(CALLS);
+    for _ in 0..CALLS {
+        let start = Instant::now();
+        f()?;
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(&times))
+}
+
+/// The actors' call: [`QNetwork::infer`] on `batch` observations.
+fn time_inference(net: &QNetwork, batch: usize) -> anyhow::Result<f64> {
+    let obs = observations(net.spec(), batch);
+    median_ms(|| {
+        net.infer(&obs, batch)?;
         Ok(())
-    })?;
-    let mut times = times.split_off(5);
-    times.sort_by(f64::total_cmp);
-    Ok(times[times.len() / 2])
+    })
+}
+
+/// The learner's forward pass without a gradient (its target network's).
+fn time_forward(net: &QNetwork, batch: usize) -> anyhow::Result<f64> {
+    let obs = observations(net.spec(), batch);
+    let x = Tensor::from_slice(&obs).reshape([batch as i64, net.spec().input_len()]);
+    tch::no_grad(|| {
+        median_ms(|| {
+            let _q = net.q_values(&x)?;
+            Ok(())
+        })
+    })
 }

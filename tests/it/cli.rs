@@ -175,7 +175,7 @@ fn bad_config_fails_with_an_error_naming_the_key() {
 }
 
 #[test]
-fn doctor_reports_a_real_forward_pass() {
+fn doctor_times_the_network_a_run_would_train() {
     let out = crossroads(&["doctor", "--json"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let report: serde_json::Value = serde_json::from_str(&stdout(&out)).expect("JSON");
@@ -184,10 +184,59 @@ fn doctor_reports_a_real_forward_pass() {
         report["torch_threads"].as_i64().is_some_and(|t| t >= 1),
         "{report}"
     );
-    let ms = report["forward_batch64_median_ms"]
-        .as_f64()
-        .expect("timing");
-    assert!(ms > 0.0 && ms.is_finite(), "{report}");
+    // Without a file: what `crossroads train` trains by default, the
+    // built-in ttg-left (conv trunk over the TTG grid, 16 environments per
+    // actor, batches of 64).
+    assert_eq!(report["config"], "built-in experiment ttg-left", "{report}");
+    assert_eq!(
+        report["network"], "dueling conv 2344-16-32-256 -> 5",
+        "{report}"
+    );
+    assert_eq!(
+        (
+            report["actor_batch"].as_u64(),
+            report["learner_batch"].as_u64()
+        ),
+        (Some(16), Some(64)),
+        "{report}"
+    );
+    for key in [
+        "actor_forward_median_ms",
+        "learner_forward_median_ms",
+        "learner_update_median_ms",
+    ] {
+        let ms = report[key].as_f64().expect("timing");
+        assert!(ms > 0.0 && ms.is_finite(), "{key}: {report}");
+    }
+
+    // The loaded layers decide: another network and batch sizes, and the
+    // observation follows the scenario (occlusion adds a channel: 6 x 18 x
+    // 26 + 4 inputs).
+    let out = crossroads(&[
+        "--set",
+        "learner.trunk=mlp",
+        "--set",
+        "learner.hidden=[32]",
+        "--set",
+        "learner.batch_size=8",
+        "--set",
+        "actor.envs=4",
+        "--set",
+        "actor.scenario=occluded-30",
+        "doctor",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&out)).expect("JSON");
+    assert_eq!(
+        (
+            report["actor_batch"].as_u64(),
+            report["learner_batch"].as_u64()
+        ),
+        (Some(4), Some(8)),
+        "{report}"
+    );
+    assert_eq!(report["network"], "dueling mlp 2812-32 -> 5", "{report}");
 }
 
 /// A config file of the older schema still runs, with a warning per moved

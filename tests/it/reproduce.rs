@@ -1,6 +1,8 @@
 //! `crossroads reproduce --quick`: the whole pipeline (training runs as
 //! real processes, TTC sweeps, DQN evaluations, tables and figures) at a
-//! smoke budget; then a second call reuses the finished runs.
+//! smoke budget; then a second call reuses the finished runs. That takes
+//! minutes (`CROSSROADS_SLOW_TESTS=1`); its quick twin runs Table II alone
+//! (two runs) on a tiny budget.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -33,8 +35,8 @@ fn cell_trials(cell: &serde_json::Value) -> u64 {
 /// A cell of a policy (named starting with `inner`) behind the safety
 /// shield: its trials, a policy name saying so, and veto counts that add
 /// up.
-fn assert_shielded(cell: &serde_json::Value, inner: &str, row: &serde_json::Value) {
-    assert_eq!(cell_trials(cell), 300, "{row}");
+fn assert_shielded(cell: &serde_json::Value, inner: &str, row: &serde_json::Value, trials: u64) {
+    assert_eq!(cell_trials(cell), trials, "{row}");
     let policy = cell["policy"].as_str().unwrap_or_default();
     assert!(
         policy.starts_with(inner) && policy.ends_with("+shield"),
@@ -55,6 +57,11 @@ fn assert_shielded(cell: &serde_json::Value, inner: &str, row: &serde_json::Valu
 
 #[test]
 fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
+    if !crate::slow_tests_enabled(
+        "reproduce::quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs",
+    ) {
+        return;
+    }
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("report");
     let o = reproduce(&out, &[]);
@@ -90,9 +97,9 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     for row in t1 {
         assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
         // The same weights behind the shield, with its counts.
-        assert_shielded(&row["shielded"], "dqn:", row);
+        assert_shielded(&row["shielded"], "dqn:", row, 300);
         // The shield alone: TTC at 0 s behind it.
-        assert_shielded(&row["shield_alone"], "ttc:0", row);
+        assert_shielded(&row["shield_alone"], "ttc:0", row, 300);
         // TTC's cell is the lowest threshold without collisions.
         assert_eq!(row["ttc"]["collision"].as_f64(), Some(0.0), "{row}");
         assert!(
@@ -106,8 +113,8 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         for method in ["ttc_creep", "ttg", "creep"] {
             assert_eq!(cell_trials(&row[method]), 300, "{method}: {row}");
         }
-        assert_shielded(&row["shielded"], "dqn:", row);
-        assert_shielded(&row["shield_alone"], "ttc-creep:0", row);
+        assert_shielded(&row["shielded"], "dqn:", row, 300);
+        assert_shielded(&row["shield_alone"], "ttc-creep:0", row, 300);
     }
     let t3 = r["table3"].as_array().expect("table3");
     assert_eq!(t3.len(), 5);
@@ -162,6 +169,71 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("holds a quick reproduction"), "{err}");
+}
+
+/// The slow test's pipeline on Table II alone at a tiny budget: two
+/// training runs as child processes, the TTC-with-creep sweeps, the DQN
+/// cells bare and behind the shield, the report's files; then the runs
+/// reused.
+#[test]
+fn a_tiny_reproduction_of_table2_trains_evaluates_reports_and_reuses() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("report");
+    let tiny = [
+        "--only",
+        "table2",
+        "--updates",
+        "20",
+        "--trials",
+        "20",
+        "--set",
+        "replay.min_size_to_sample=100",
+        "--set",
+        "train.eval_every=10",
+        "--set",
+        "train.eval_trials=20",
+        "--set",
+        "train.confirm_trials=20",
+    ];
+    let o = reproduce(&out, &tiny);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    for file in [
+        "README.md",
+        "table2.csv",
+        "training.csv",
+        "results.json",
+        "configs/creep-occluded.toml",
+        "runs/creep-occluded/best/weights.safetensors",
+        "runs/ttg-occluded/curve.png",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing; log:\n{log}");
+    }
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).expect("results"))
+            .expect("json");
+    assert_eq!(r["quick"], true);
+    assert!(r["table1"].as_array().is_none_or(Vec::is_empty), "{r}");
+    let t2 = r["table2"].as_array().expect("table2");
+    assert_eq!(t2.len(), 3);
+    for row in t2 {
+        for method in ["ttc_creep", "ttg", "creep"] {
+            assert_eq!(cell_trials(&row[method]), 20, "{method}: {row}");
+        }
+        assert_shielded(&row["shielded"], "dqn:", row, 20);
+        assert_shielded(&row["shield_alone"], "ttc-creep:0", row, 20);
+    }
+    let runs = r["runs"].as_array().expect("runs");
+    assert_eq!(runs.len(), 2, "creep and TTG on occlusion: {runs:?}");
+    let md = std::fs::read_to_string(out.join("README.md")).expect("readme");
+    assert!(md.contains("--quick smoke run"), "{md}");
+    assert!(md.contains("| DQN-Creep + shield |"), "{md}");
+
+    let again = reproduce(&out, &tiny);
+    let log2 = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{log2}");
+    assert_eq!(log2.matches("reusing").count(), 2, "{log2}");
+    assert!(!log2.contains("training into"), "{log2}");
 }
 
 #[test]

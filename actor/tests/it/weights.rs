@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::RecvTimeoutError;
 use std::time::Duration;
 
 use crossroads_actor::{
@@ -206,16 +207,22 @@ async fn a_running_actor_takes_newer_weights_from_shared_memory() {
             let net = QNetwork::new(small_spec(), 9).expect("network");
             let bytes = net.to_safetensors(0).expect("bytes").len();
             let mut publisher = ShmWeightsPublisher::new(&connection, bytes).expect("publisher");
-            while let Ok(v) = rx.recv() {
+            let mut next = rx.recv().ok();
+            while let Some(v) = next {
                 let w = Weights::from_safetensors(net.to_safetensors(v).expect("bytes"), v * 10, 0)
                     .expect("weights");
                 publisher.publish(&w).expect("publish");
                 published.store(true, Ordering::SeqCst);
-                // Late subscribers are connected on the next update.
-                for _ in 0..50 {
+                // Late subscribers are connected on the next update: update
+                // until the test sends the next version or hangs up.
+                next = loop {
                     publisher.update_connections();
-                    std::thread::sleep(Duration::from_millis(10));
-                }
+                    match rx.recv_timeout(Duration::from_millis(10)) {
+                        Ok(v) => break Some(v),
+                        Err(RecvTimeoutError::Timeout) => {}
+                        Err(RecvTimeoutError::Disconnected) => break None,
+                    }
+                };
             }
         })
     };

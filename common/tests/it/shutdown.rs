@@ -45,5 +45,7 @@ async fn sigterm_fires_the_signal() {
         .await
         .expect("SIGTERM fired the shutdown signal");
     assert!(shutdown.by_signal());
+    // This sleep is the test: were the second SIGTERM counted as a second
+    // request, it would end the process within it.
     tokio::time::sleep(Duration::from_millis(300)).await;
 }

@@ -11,7 +11,7 @@ use crossroads_replay::{RunningServer, TableImage};
 use crossroads_transport::grpc::{ClientError, ReplayClient};
 use crossroads_types::{RejectReason, TransitionBatch};
 
-use crate::util::{batch, server_config};
+use crate::util::{WAIT, batch, server_config, wait_until};
 
 async fn serve(config: &Config) -> (RunningServer, Shutdown, prometheus::Registry) {
     let registry = crossroads_common::metrics::registry("replay").expect("registry");
@@ -394,19 +394,29 @@ async fn callers_that_go_away_do_not_wedge_the_server() {
     )
     .await;
     assert!(gave_up.is_err(), "the sample was still waiting");
-    // An actor that drops its stream with a batch unacknowledged.
+    // An actor that drops its stream once its batch is stored, its ack
+    // unread: the server answers nobody.
+    let table = server.table("t").expect("table");
     let mut stream = c.insert_stream(2).await.expect("stream");
     stream.send(batch(0, 10, None)).await.expect("send");
+    wait_until(WAIT, "the streamed batch to be stored", async || {
+        table.stats().size == 10
+    })
+    .await;
     drop(stream);
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    // One that drops its stream with a batch still on the way: whenever
+    // the server gets to it, the batch is all in or all out.
+    let mut stream = c.insert_stream(2).await.expect("stream");
+    stream.send(batch(10, 10, None)).await.expect("send");
+    drop(stream);
     // Everyone else carries on.
-    c.insert(batch(10, 40, None)).await.expect("insert");
+    c.insert(batch(20, 40, None)).await.expect("insert");
     let size = c.info().await.expect("info").size;
     assert!(
-        size == 40 || size == 50,
+        size == 50 || size == 60,
         "the dropped batch is all in or all out: {size}"
     );
-    c.insert(batch(50, 10, None)).await.expect("insert");
+    c.insert(batch(60, 10, None)).await.expect("insert");
     let s = tokio::time::timeout(
         Duration::from_secs(5),
         c.sample(4, 0.0, Duration::from_secs(1)),
@@ -431,7 +441,13 @@ async fn shutdown_ends_open_streams_and_waiting_samples() {
         let c = c.clone();
         async move { c.sample(1, 0.0, Duration::from_secs(60)).await }
     });
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    let table = server.table("t").expect("table");
+    wait_until(
+        WAIT,
+        "the sample to wait for the minimum size",
+        async || table.stats().sample_waits == 1,
+    )
+    .await;
     stop(server, shutdown).await;
     let err = waiting.await.expect("task").expect_err("server gone");
     assert!(err.is_retryable(), "{err:?}");
@@ -509,12 +525,11 @@ async fn periodic_snapshots_are_written_and_a_renamed_table_refuses_to_start() {
         .insert(batch(0, 5, None))
         .await
         .expect("insert");
-    tokio::time::sleep(Duration::from_millis(1600)).await;
-    let info = client(&server, "t").info().await.expect("info");
-    assert!(
-        info.last_snapshot_unix_ms > 0,
-        "a periodic snapshot was written"
-    );
+    let c = client(&server, "t");
+    wait_until(WAIT, "a periodic snapshot (every second)", async || {
+        c.info().await.is_ok_and(|i| i.last_snapshot_unix_ms > 0)
+    })
+    .await;
     let text = crossroads_common::metrics::render(&registry);
     assert!(
         !text.contains("crossroads_replay_snapshots_total{result=\"ok\"} 0"),

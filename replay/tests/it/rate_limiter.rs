@@ -8,7 +8,7 @@ use crossroads_common::Shutdown;
 use crossroads_replay::rate_limiter::RateLimiterConfig;
 use crossroads_replay::{Table, TableError, TableMetrics};
 
-use crate::util::{prepared, table_config};
+use crate::util::{WAIT, prepared, table_config, wait_until};
 
 fn limited(min: u64, ratio: f64, tolerance: f64) -> Arc<Table> {
     let mut c = table_config(1000, 1.0);
@@ -32,7 +32,12 @@ async fn sampling_waits_for_the_minimum_size_then_proceeds() {
         let shutdown = shutdown.clone();
         tokio::spawn(async move { t.sample(4, 0.0, Duration::from_secs(10), &shutdown).await })
     };
-    tokio::time::sleep(Duration::from_millis(100)).await;
+    wait_until(
+        WAIT,
+        "the sample to wait for the minimum size",
+        async || t.stats().sample_waits == 1,
+    )
+    .await;
     assert!(!sampler.is_finished(), "5 of 10 inserted: the sample waits");
     assert!(!t.stats().can_sample);
     t.insert(&prepared(5, 5, None), Duration::from_secs(1), &shutdown)
@@ -101,7 +106,11 @@ async fn inserts_wait_for_samples_under_a_ratio() {
                 .await
         })
     };
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    // The refused insert above waited once; this one is the second.
+    wait_until(WAIT, "the insert to wait for samples", async || {
+        t.stats().insert_waits == 2
+    })
+    .await;
     assert!(!inserter.is_finished());
     t.sample(4, 0.0, Duration::from_secs(1), &shutdown)
         .await
@@ -139,7 +148,10 @@ async fn a_caller_that_goes_away_mid_wait_leaves_the_table_usable() {
         let shutdown = shutdown.clone();
         tokio::spawn(async move { t.sample(1, 0.0, Duration::from_secs(3600), &shutdown).await })
     };
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    wait_until(WAIT, "the sample to wait", async || {
+        t.stats().sample_waits == 1
+    })
+    .await;
     waiter.abort();
     assert!(waiter.await.expect_err("aborted").is_cancelled());
     t.insert(&prepared(0, 2, None), Duration::from_secs(1), &shutdown)
@@ -164,7 +176,10 @@ async fn shutdown_ends_a_wait() {
         let shutdown = shutdown.clone();
         tokio::spawn(async move { t.sample(1, 0.0, Duration::from_secs(3600), &shutdown).await })
     };
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    wait_until(WAIT, "the sample to wait", async || {
+        t.stats().sample_waits == 1
+    })
+    .await;
     shutdown.trigger();
     let r = tokio::time::timeout(Duration::from_secs(5), waiter)
         .await

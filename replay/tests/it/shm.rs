@@ -21,15 +21,11 @@ fn transport(prefix: &str) -> TransportConfig {
     }
 }
 
-/// The publishing side, run by `batches_from_another_process_land_in_the_table`
-/// in a child process (this same test binary); does nothing otherwise.
-#[test]
-#[ignore = "helper: runs only as the child process of the shared-memory test"]
-fn publisher_child() {
-    let Ok(prefix) = std::env::var(CHILD_PREFIX) else {
-        return;
-    };
-    let mut publisher = ShmBatchPublisher::new(&transport(&prefix), "t").expect("publisher");
+/// The publishing side: `batches_from_another_process_land_in_the_table`
+/// run again, in a child process of this same test binary, with
+/// [`CHILD_PREFIX`] set.
+fn publish_as_child(prefix: &str) {
+    let mut publisher = ShmBatchPublisher::new(&transport(prefix), "t").expect("publisher");
     let start = Instant::now();
     while publisher.subscribers() == 0 {
         assert!(
@@ -68,6 +64,10 @@ fn publisher_child() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn batches_from_another_process_land_in_the_table() {
+    if let Ok(prefix) = std::env::var(CHILD_PREFIX) {
+        publish_as_child(&prefix);
+        return;
+    }
     let prefix = unique_prefix("ingest");
     let mut config = server_config(None);
     config.replay.shm_ingest = true;
@@ -82,9 +82,8 @@ async fn batches_from_another_process_land_in_the_table() {
         tokio::task::spawn_blocking(move || {
             std::process::Command::new(std::env::current_exe().expect("test binary"))
                 .args([
-                    "shm::publisher_child",
+                    "shm::batches_from_another_process_land_in_the_table",
                     "--exact",
-                    "--ignored",
                     "--nocapture",
                     "--test-threads=1",
                 ])

@@ -107,6 +107,23 @@ pub fn server_config(snapshot_dir: Option<&std::path::Path>) -> Config {
     c
 }
 
+/// How long a test waits for something that takes milliseconds, before it
+/// fails: generous, since tests share the cores with each other.
+pub const WAIT: Duration = Duration::from_secs(10);
+
+/// Waits until `condition` holds, checking every 5 ms; fails naming `what`
+/// once `timeout` has passed without it.
+pub async fn wait_until(timeout: Duration, what: &str, mut condition: impl AsyncFnMut() -> bool) {
+    let deadline = tokio::time::Instant::now() + timeout;
+    while !condition().await {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "waited {timeout:?} for {what}, in vain"
+        );
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
 /// A shared-memory prefix no other test or process uses.
 pub fn unique_prefix(test: &str) -> String {
     let nanos = std::time::SystemTime::now()
