@@ -343,8 +343,23 @@ pub const MOVED_KEYS: [(&str, &str); 6] = [
     ("train.actors", "actor.count"),
 ];
 
+/// How late a layer comes (later layers win): defaults, the built-in
+/// base, the file, the environment, the command line.
+fn layer_rank(metadata: Option<&Metadata>) -> u8 {
+    match metadata {
+        None => 0,
+        Some(m) if m.name == DEFAULTS => 0,
+        Some(m) if matches!(m.source, Some(Source::File(_))) => 2,
+        Some(m) if m.name.contains("environment") => 3,
+        Some(m) if m.name == COMMAND_LINE => 4,
+        Some(_) => 1,
+    }
+}
+
 /// A merged configuration with [`MOVED_KEYS`] moved to their new place
 /// (`None` when no layer has an old key), and a warning per old key found.
+/// Between an old key and its new one (or two old ones), the later layer
+/// wins as for any key; two that disagree in the same layer are refused.
 fn move_legacy_keys(figment: &Figment) -> Result<(Option<Figment>, Vec<String>), ConfigError> {
     let found: Vec<_> = MOVED_KEYS
         .iter()
@@ -358,61 +373,75 @@ fn move_legacy_keys(figment: &Figment) -> Result<(Option<Figment>, Vec<String>),
     })?;
     let mut problems = Vec::new();
     let mut notes = Vec::new();
-    let mut refuse = |key: &str, problem: String| {
-        problems.push(ConfigProblem {
-            origin: origin_of(figment.find_metadata(key), key),
-            key: key.to_owned(),
-            problem,
-        });
-    };
-    for &(old, new, ref value) in &found {
-        let origin = origin_of(figment.find_metadata(old), old);
-        notes.push(format!(
-            "{origin}: key `{old}` is deprecated and was read as `{new}`; write `{new}` once instead"
-        ));
-        // Another old key for the same new one that says otherwise.
-        if let Some(&(other, _, ref theirs)) = found
+    let mut news: Vec<&str> = found.iter().map(|&(_, new, _)| new).collect();
+    news.sort_unstable();
+    news.dedup();
+    for new in news {
+        // Every place that says this key: its old names, and the new one
+        // when a layer above the defaults sets it.
+        let mut says: Vec<(&str, Value, u8)> = found
             .iter()
-            .find(|&&(o, n, ref v)| n == new && o != old && v != value)
+            .filter(|&&(_, n, _)| n == new)
+            .map(|(old, _, v)| (*old, v.clone(), layer_rank(figment.find_metadata(old))))
+            .collect();
+        let new_rank = layer_rank(figment.find_metadata(new));
+        if new_rank > 0
+            && let Ok(v) = figment.find_value(new)
         {
-            refuse(
-                old,
-                format!(
-                    "says {}, but `{other}` says {}; both moved to `{new}`: state it once there",
-                    show(value),
-                    show(theirs)
-                ),
-            );
-            continue;
+            says.push((new, v, new_rank));
         }
-        let set_explicitly = figment
-            .find_metadata(new)
-            .is_some_and(|m| m.name != DEFAULTS);
-        if set_explicitly
-            && let Ok(current) = figment.find_value(new)
-            && current != *value
-        {
-            refuse(
-                old,
+        let top = says.iter().map(|&(_, _, r)| r).max().unwrap_or(0);
+        let latest: Vec<_> = says.iter().filter(|&&(_, _, r)| r == top).collect();
+        let (first, value, _) = latest[0];
+        if let Some((other, theirs, _)) = latest.iter().find(|(_, v, _)| v != value) {
+            let (old, said, other, theirs) = if *other == new {
+                (*first, value, *other, theirs)
+            } else {
+                (*other, theirs, *first, value)
+            };
+            let problem = if other == new {
                 format!(
                     "moved to `{new}`, which says {} here while `{old}` says {}; remove `{old}`",
-                    show(&current),
-                    show(value)
-                ),
-            );
+                    show(theirs),
+                    show(said)
+                )
+            } else {
+                format!(
+                    "says {}, but `{other}` says {}; both moved to `{new}`: state it once there",
+                    show(said),
+                    show(theirs)
+                )
+            };
+            problems.push(ConfigProblem {
+                origin: origin_of(figment.find_metadata(old), old),
+                key: old.to_owned(),
+                problem,
+            });
             continue;
         }
-        let (old_section, old_key) = old.split_once('.').expect("dotted");
-        if let Some(Value::Dict(_, section)) = data.get_mut(old_section) {
-            section.remove(old_key);
+        let (value, winner) = (value.clone(), *first);
+        for (old, _, _) in says.iter().filter(|&&(k, _, _)| k != new) {
+            let origin = origin_of(figment.find_metadata(old), old);
+            let read = if winner == new {
+                format!("was overridden by `{new}`")
+            } else {
+                format!("was read as `{new}`")
+            };
+            notes.push(format!(
+                "{origin}: key `{old}` is deprecated and {read}; write `{new}` once instead"
+            ));
+            let (section, key) = old.split_once('.').expect("dotted");
+            if let Some(Value::Dict(_, section)) = data.get_mut(section) {
+                section.remove(key);
+            }
         }
-        let (new_section, new_key) = new.split_once('.').expect("dotted");
-        if let Some(Value::Dict(_, section)) = data.get_mut(new_section) {
-            section.insert(new_key.to_owned(), value.clone());
+        let (section, key) = new.split_once('.').expect("dotted");
+        if let Some(Value::Dict(_, section)) = data.get_mut(section) {
+            section.insert(key.to_owned(), value);
         } else {
-            let mut section = Dict::new();
-            section.insert(new_key.to_owned(), value.clone());
-            data.insert(new_section.to_owned(), Value::from(section));
+            let mut dict = Dict::new();
+            dict.insert(key.to_owned(), value);
+            data.insert(section.to_owned(), Value::from(dict));
         }
     }
     if !problems.is_empty() {

@@ -222,7 +222,7 @@ fn doctor_times_the_network_a_run_would_train() {
         "--set",
         "actor.envs=4",
         "--set",
-        "actor.scenario=occluded-30",
+        "sim.scenario=occluded-30",
         "doctor",
         "--json",
     ]);

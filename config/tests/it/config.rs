@@ -351,3 +351,29 @@ fn the_run_configs_committed_before_the_sim_section_still_load() {
     }
     assert!(seen >= 10, "only {seen} run configs found");
 }
+
+#[test]
+fn between_an_old_key_and_its_new_one_the_later_layer_wins() {
+    // A built-in experiment states the new key; an old key on the command
+    // line overrides it, as any later layer does.
+    let config = ConfigLoader::new()
+        .without_env()
+        .base("experiment", "[sim]\nscenario = \"left\"\n")
+        .sets(["actor.scenario=occluded-30"])
+        .load()
+        .expect("the command line wins");
+    assert_eq!(config.sim.scenario, "occluded-30");
+    // The new key on the command line overrides an old one in the file.
+    let f = toml_file("[actor]\nscenario = \"right\"\n");
+    let (config, notes) = ConfigLoader::new()
+        .without_env()
+        .file(Some(f.path()))
+        .sets(["sim.scenario=left2"])
+        .load_with_notes()
+        .expect("the command line wins");
+    assert_eq!(config.sim.scenario, "left2");
+    assert!(
+        notes[0].contains("overridden by `sim.scenario`"),
+        "{notes:#?}"
+    );
+}
