@@ -31,6 +31,8 @@ pub struct Columns {
     pub next_observation_index: Vec<u32>,
 }
 
+// The per-row methods are `#[inline]`: the replay table calls them per item
+// from another crate.
 impl Columns {
     /// Empty columns with room for `n` rows each.
     pub fn with_capacity(n: usize) -> Self {
@@ -45,16 +47,19 @@ impl Columns {
     }
 
     /// Number of rows: the length of `actions`.
+    #[inline]
     pub fn len(&self) -> usize {
         self.actions.len()
     }
 
     /// Whether there are no rows.
+    #[inline]
     pub fn is_empty(&self) -> bool {
         self.actions.is_empty()
     }
 
     /// Appends a row.
+    #[inline]
     pub fn push(&mut self, t: Transition) {
         self.actions.push(t.action);
         self.rewards.push(t.reward);
@@ -65,6 +70,7 @@ impl Columns {
     }
 
     /// Row `i`, if every column has it.
+    #[inline]
     pub fn get(&self, i: usize) -> Option<Transition> {
         Some(Transition {
             observation: *self.observation_index.get(i)?,
@@ -77,6 +83,7 @@ impl Columns {
     }
 
     /// Overwrites row `i`. Panics if a column is shorter than `i + 1`.
+    #[inline]
     pub fn set(&mut self, i: usize, t: Transition) {
         self.actions[i] = t.action;
         self.rewards[i] = t.reward;
