@@ -4,6 +4,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
+use crossroads_types::TrunkKind;
 use serde::{Deserialize, Serialize};
 
 use super::Checks;
@@ -32,17 +33,6 @@ pub enum TargetUpdate {
     Soft,
 }
 
-/// The trunk of the Q-network.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Trunk {
-    /// Fully connected layers over the flat observation.
-    #[default]
-    Mlp,
-    /// A small conv net over the grid, then one fully connected layer.
-    Conv,
-}
-
 /// The learner (`crossroads learner`): dueling double DQN with n-step
 /// returns, trained from the replay server, publishing weights and keeping
 /// checkpoints.
@@ -53,7 +43,7 @@ pub struct LearnerConfig {
     /// port 0 picks a free port.
     pub listen: SocketAddr,
     /// Trunk of the dueling network: `mlp` or `conv`.
-    pub trunk: Trunk,
+    pub trunk: TrunkKind,
     /// For `mlp` the hidden widths; for `conv` the channels of each 3x3
     /// convolution, then the width of the fully connected layer.
     pub hidden: Vec<u32>,
@@ -144,7 +134,7 @@ impl Default for LearnerConfig {
     fn default() -> Self {
         Self {
             listen: SocketAddr::from(([127, 0, 0, 1], 50052)),
-            trunk: Trunk::Mlp,
+            trunk: TrunkKind::Mlp,
             hidden: vec![256, 256],
             seed: 1,
             batch_size: 64,
@@ -200,7 +190,7 @@ impl LearnerConfig {
             ),
         );
         problems.check(
-            self.trunk != Trunk::Conv || self.hidden.len() >= 2,
+            self.trunk != TrunkKind::Conv || self.hidden.len() >= 2,
             "hidden",
             format!(
                 "a conv trunk needs the channels of at least one convolution and then the fully connected width, got {:?}",

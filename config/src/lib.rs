@@ -82,7 +82,8 @@ impl Checks {
 }
 
 pub use actor::{ActorConfig, ActorTransport};
-pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate, Trunk};
+pub use crossroads_types::TrunkKind;
+pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate};
 pub use replay::{ReplayConfig, WeightNormalization};
 pub use runtime::RuntimeConfig;
 pub use sim::SimConfig;

@@ -1,9 +1,9 @@
 //! The network a run's configuration describes.
 
-use crossroads_config::{LearnerConfig, SimConfig, Trunk};
+use crossroads_config::{LearnerConfig, SimConfig};
 
 use crate::ModelError;
-use crate::spec::{NetworkSpec, TrunkKind};
+use crate::spec::NetworkSpec;
 
 /// The network `[sim]` (observation, action set) and `[learner]` (trunk,
 /// hidden sizes) describe: the learner trains it and actors start from it,
@@ -17,15 +17,11 @@ pub fn network_spec(sim: &SimConfig, c: &LearnerConfig) -> Result<NetworkSpec, M
                 .to_owned(),
         )
     })?;
-    let trunk = match c.trunk {
-        Trunk::Mlp => TrunkKind::Mlp,
-        Trunk::Conv => TrunkKind::Conv,
-    };
     let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
     Ok(NetworkSpec::new(
         observation,
         &sim.action_set,
-        trunk,
+        c.trunk,
         hidden,
     )?)
 }

@@ -8,7 +8,8 @@ use crate::ModelError;
 use crate::spec::{NetworkSpec, TrunkKind};
 use crate::weights::{self, WeightsMeta};
 
-enum Trunk {
+/// The trunk's layers, as built.
+enum TrunkLayers {
     Mlp(Vec<nn::Linear>),
     Conv {
         convs: Vec<nn::Conv2D>,
@@ -26,7 +27,7 @@ enum Trunk {
 pub struct QNetwork {
     spec: NetworkSpec,
     vs: nn::VarStore,
-    trunk: Trunk,
+    trunk: TrunkLayers,
     value: nn::Linear,
     advantage: nn::Linear,
 }
@@ -112,7 +113,7 @@ impl QNetwork {
                     layers.push(nn::linear(&trunk_path / i, width, h, Default::default()));
                     width = h;
                 }
-                (Trunk::Mlp(layers), width)
+                (TrunkLayers::Mlp(layers), width)
             }
             TrunkKind::Conv => {
                 let o = &spec.observation;
@@ -133,7 +134,7 @@ impl QNetwork {
                 }
                 let flat = c * h * w + o.extra;
                 let fc = nn::linear(&trunk_path / "fc", flat, fc_width[0], Default::default());
-                (Trunk::Conv { convs, fc }, fc_width[0])
+                (TrunkLayers::Conv { convs, fc }, fc_width[0])
             }
         };
         let value = nn::linear(&root / "value", width, 1, Default::default());
@@ -218,10 +219,10 @@ impl QNetwork {
 
     fn trunk_features(&self, obs: &Tensor) -> Tensor {
         match &self.trunk {
-            Trunk::Mlp(layers) => layers
+            TrunkLayers::Mlp(layers) => layers
                 .iter()
                 .fold(obs.shallow_clone(), |h, l| l.forward(&h).relu()),
-            Trunk::Conv { convs, fc } => {
+            TrunkLayers::Conv { convs, fc } => {
                 let o = &self.spec.observation;
                 let batch = obs.size()[0];
                 let grid = obs

@@ -65,7 +65,7 @@ fn learner_weights_load_in_python_safetensors() {
     }
 
     let config = crossroads_config::LearnerConfig {
-        trunk: crossroads_config::Trunk::Conv,
+        trunk: crossroads_types::TrunkKind::Conv,
         hidden: vec![8, 16, 64],
         ..Default::default()
     };
