@@ -210,7 +210,10 @@ fn a_tiny_run_across_real_processes_writes_its_folder_and_resumes() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (rows, e) = check_finished_run(&out, 30, 50);
     assert_eq!(e["trials"], 200, "{e}");
-    check_resume(&out, TINY, &rows, 30, 40);
+    // Resumed on a full replay the learner updates at once: a budget of a
+    // few more updates ends it before `train` sees it ready (polled every
+    // 200 ms), which `train` reports as a failure.
+    check_resume(&out, TINY, &rows, 30, 300);
 }
 
 #[test]
