@@ -96,7 +96,7 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
     let mut transport = c.transport.clone();
     transport.replay_endpoint = format!("http://{}", addr.replay);
     let replay_client = ReplayClient::new(&transport, &c.replay.table)?;
-    wait_ready(&mut replay, &shutdown, || async {
+    wait_ready(&mut replay, &shutdown, false, || async {
         replay_client
             .info()
             .await
@@ -119,7 +119,7 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
         c.learner.api_token.clone(),
         timeout,
     )?;
-    let ready = wait_ready(&mut learner, &shutdown, || async {
+    let ready = wait_ready(&mut learner, &shutdown, true, || async {
         learner_client
             .status()
             .await
