@@ -27,9 +27,7 @@ pub mod telemetry;
 pub mod train;
 pub mod transport;
 
-/// Action set names the simulator knows (`crossroads_sim::ActionSet`; this
-/// crate does not depend on the simulator).
-pub(crate) const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
+pub(crate) use crossroads_types::spec::ACTION_SETS;
 
 /// The problems a section's `validate` finds, each under its dotted key
 /// (`section.key`).

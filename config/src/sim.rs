@@ -6,12 +6,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{ACTION_SETS, Checks};
+use crossroads_types::spec::ObservationLayout;
 
-/// Observation layouts the network can read (`crossroads_types`'s
-/// `ObservationLayout::named`; this crate does not depend on it).
-pub(crate) const OBSERVATIONS: [&str; 4] =
-    ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
+use super::{ACTION_SETS, Checks};
 
 /// What a run simulates.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -74,7 +71,7 @@ impl SimConfig {
         );
         problems.one_of("action_set", &self.action_set, &ACTION_SETS);
         if let Some(observation) = &self.observation {
-            problems.one_of("observation", observation, &OBSERVATIONS);
+            problems.one_of("observation", observation, &ObservationLayout::KINDS);
         }
         problems.into_vec()
     }

@@ -37,10 +37,15 @@ impl ObservationSpec {
         }
     }
 
-    /// The time-to-go grid: 18 x 26 cells, 5 channels (occupancy, heading,
-    /// speed, x and y offset in the cell).
+    /// The time-to-go observation as actors send it: flat, the 18 x 26
+    /// grid of 5 channels (occupancy, heading, speed, x and y offset in the
+    /// cell) and the ego's features, as [`ObservationLayout`] lays it out
+    /// (2344 values).
+    ///
+    /// [`ObservationLayout`]: crate::spec::ObservationLayout
     pub fn ttg() -> Self {
-        Self::new("ttg", [18, 26, 5])
+        let layout = crate::spec::ObservationLayout::named("ttg").expect("a built-in kind");
+        Self::new("ttg", [layout.len() as u32])
     }
 
     /// Number of values of one observation; `None` if the shape is empty or
@@ -630,7 +635,7 @@ mod tests {
 
     #[test]
     fn spec_len_guards_overflow() {
-        assert_eq!(ObservationSpec::ttg().num_values(), Some(2340));
+        assert_eq!(ObservationSpec::ttg().num_values(), Some(2344));
         assert_eq!(
             ObservationSpec::new("x", [u32::MAX, u32::MAX]).num_values(),
             None

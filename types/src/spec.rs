@@ -86,6 +86,9 @@ impl ObservationLayout {
     }
 }
 
+/// The action sets the simulator knows (`crossroads_sim::ActionSet`).
+pub const ACTION_SETS: [&str; 3] = ["ttg", "sequential", "creep"];
+
 /// Number of actions of an action set: `ttg` 5, `sequential` 12, `creep` 3.
 pub fn num_actions_of(action_set: &str) -> Result<i64, SpecError> {
     match action_set {
@@ -93,7 +96,8 @@ pub fn num_actions_of(action_set: &str) -> Result<i64, SpecError> {
         "sequential" => Ok(12),
         "creep" => Ok(3),
         other => Err(SpecError::Invalid(format!(
-            "unknown action set {other:?}; expected ttg, sequential or creep"
+            "unknown action set {other:?}; expected one of {}",
+            ACTION_SETS.join(", ")
         ))),
     }
 }
