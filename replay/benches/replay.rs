@@ -23,12 +23,12 @@ fn bytes_per_transition() {
     let mut episodes = SyntheticEpisodes::new(1);
     fill(&table, &mut episodes, 64);
     let stats = table.stats();
-    let per = stats.bytes as f64 / stats.size as f64;
+    let per = stats.info.bytes_stored as f64 / stats.info.size as f64;
     println!(
         "replay/bytes_per_transition: {per:.1} bytes ({} transitions, {} distinct observations, {:.1} MiB; 2M transitions ~ {:.0} MiB)",
-        stats.size,
+        stats.info.size,
         stats.observations,
-        stats.bytes as f64 / (1 << 20) as f64,
+        stats.info.bytes_stored as f64 / (1 << 20) as f64,
         per * 2e6 / (1 << 20) as f64,
     );
 }

@@ -140,7 +140,7 @@ pub fn bench_table(capacity: usize) -> Table {
 /// Fills `table` to capacity with batches of `batch` transitions.
 pub fn fill(table: &Table, episodes: &mut SyntheticEpisodes, batch: usize) {
     let capacity = table.config().capacity as u64;
-    while table.stats().size < capacity {
+    while table.stats().info.size < capacity {
         if let Ok(p) = PreparedBatch::try_from(episodes.batch(batch)) {
             let _ = table.insert_now(&p);
         }
@@ -173,7 +173,7 @@ pub fn run(capacity: usize, rounds: usize) -> Report {
     let mut episodes = SyntheticEpisodes::new(1);
     fill(&table, &mut episodes, 64);
     let stats = table.stats();
-    let bytes_per_transition = stats.bytes as f64 / stats.size as f64;
+    let bytes_per_transition = stats.info.bytes_stored as f64 / stats.info.size as f64;
 
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

@@ -294,35 +294,17 @@ impl pb::replay_server::Replay for ReplayService {
         request: Request<pb::InfoRequest>,
     ) -> Result<Response<pb::TableInfo>, Status> {
         let (state, r) = (&self.state, request.into_inner());
-        let s = state.table_or_status(&r.table)?.stats();
-        Ok(Response::new(pb::TableInfo {
-            name: s.name,
-            size: s.size,
-            capacity: s.capacity,
-            inserts_total: s.inserts_total,
-            samples_total: s.samples_total,
-            priority_updates_total: s.priority_updates_total,
-            ignored_updates_total: s.ignored_updates_total,
-            rejections_total: state
-                .metrics
-                .rejections()
-                .into_iter()
-                .filter(|(_, n)| *n > 0)
-                .map(|(reason, n)| (reason.to_owned(), n))
-                .collect(),
-            rate_limiter: Some(pb::RateLimiterInfo {
-                min_size_to_sample: s.limiter.min_size_to_sample,
-                samples_per_insert: s.limiter.samples_per_insert,
-                error_tolerance: s.limiter.tolerance,
-                can_sample: s.can_sample,
-                can_insert: s.can_insert,
-                sample_waits_total: s.sample_waits,
-                insert_waits_total: s.insert_waits,
-            }),
-            bytes_stored: s.bytes,
-            last_snapshot_unix_ms: state.metrics.last_snapshot_unix_ms.load(Ordering::SeqCst)
-                as i64,
-        }))
+        let mut info = state.table_or_status(&r.table)?.stats().into_info();
+        info.rejections_total = state
+            .metrics
+            .rejections()
+            .into_iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(reason, n)| (reason.to_owned(), n))
+            .collect();
+        info.last_snapshot_unix_ms =
+            state.metrics.last_snapshot_unix_ms.load(Ordering::SeqCst) as i64;
+        Ok(Response::new(wire::table_info_to_wire(info)))
     }
 
     async fn snapshot(

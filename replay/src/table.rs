@@ -38,6 +38,8 @@ use tokio::sync::Notify;
 
 use crate::compact;
 use crate::metrics::TableMetrics;
+use crossroads_transport::grpc::{RateLimiterInfo, TableInfo};
+
 use crate::rate_limiter::{RateLimiter, RateLimiterConfig};
 use crate::storage::{ObservationStore, content_hash};
 use crate::sum_tree::SumTree;
@@ -183,39 +185,31 @@ pub struct Inserted {
     pub first_key: u64,
 }
 
-/// A table's size, counters and limiter state.
+/// A table's size, counters and limiter state: what `Info` reports of it
+/// (the server adds its rejections and last snapshot), and what only the
+/// table knows.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TableStats {
-    /// Table name.
-    pub name: String,
-    /// Items held.
-    pub size: u64,
-    /// Items it can hold.
-    pub capacity: u64,
-    /// Items ever inserted (across restores).
-    pub inserts_total: u64,
-    /// Items ever sampled (across restores).
-    pub samples_total: u64,
-    /// Priorities updated.
-    pub priority_updates_total: u64,
-    /// Updates for keys no longer held.
-    pub ignored_updates_total: u64,
-    /// Limiter settings.
-    pub limiter: RateLimiterConfig,
-    /// Whether a sample may proceed now.
-    pub can_sample: bool,
-    /// Whether an insert may proceed now.
-    pub can_insert: bool,
-    /// Samples that had to wait (this process).
-    pub sample_waits: u64,
-    /// Inserts that had to wait (this process).
-    pub insert_waits: u64,
-    /// Bytes of memory the table holds.
-    pub bytes: u64,
+    /// Name, size, capacity, counters and bytes, as `Info` reports them
+    /// (`rate_limiter` is [`Self::limiter`]; `rejections_total` and
+    /// `last_snapshot_unix_ms` are the server's, empty here).
+    pub info: TableInfo,
+    /// The rate limiter's settings and state.
+    pub limiter: RateLimiterInfo,
     /// Distinct observations held.
     pub observations: u64,
     /// Next key to be given.
     pub next_key: u64,
+}
+
+impl TableStats {
+    /// What `Info` reports: the counters with the rate limiter.
+    pub fn into_info(self) -> TableInfo {
+        TableInfo {
+            rate_limiter: Some(self.limiter),
+            ..self.info
+        }
+    }
 }
 
 /// A table's whole content in FIFO order, for snapshots.
@@ -466,20 +460,28 @@ impl Table {
         let inner = self.inner.lock();
         let (inserts_total, samples_total) = inner.limiter.counts();
         let (insert_waits, sample_waits) = inner.limiter.waits();
+        let limiter = self.config.limiter;
         TableStats {
-            name: self.config.name.clone(),
-            size: inner.size as u64,
-            capacity: self.config.capacity as u64,
-            inserts_total,
-            samples_total,
-            priority_updates_total: inner.priority_updates_total,
-            ignored_updates_total: inner.ignored_updates_total,
-            limiter: self.config.limiter,
-            can_sample: inner.limiter.can_sample() && inner.size > 0,
-            can_insert: inner.limiter.can_insert(),
-            sample_waits,
-            insert_waits,
-            bytes: inner.bytes() as u64,
+            info: TableInfo {
+                name: self.config.name.clone(),
+                size: inner.size as u64,
+                capacity: self.config.capacity as u64,
+                inserts_total,
+                samples_total,
+                priority_updates_total: inner.priority_updates_total,
+                ignored_updates_total: inner.ignored_updates_total,
+                bytes_stored: inner.bytes() as u64,
+                ..TableInfo::default()
+            },
+            limiter: RateLimiterInfo {
+                min_size_to_sample: limiter.min_size_to_sample,
+                samples_per_insert: limiter.samples_per_insert,
+                error_tolerance: limiter.tolerance,
+                can_sample: inner.limiter.can_sample() && inner.size > 0,
+                can_insert: inner.limiter.can_insert(),
+                sample_waits_total: sample_waits,
+                insert_waits_total: insert_waits,
+            },
             observations: inner.store.len() as u64,
             next_key: inner.next_key,
         }

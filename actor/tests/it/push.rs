@@ -92,11 +92,11 @@ async fn pushes_reach_a_real_replay_server_over_shared_memory() {
     }
     let table = server.table("t").expect("table");
     eventually(Duration::from_secs(20), "100 items over iceoryx2", || {
-        table.stats().size >= 100
+        table.stats().info.size >= 100
     })
     .await;
     pusher.close(Duration::from_secs(5)).await;
-    assert_eq!(table.stats().size, 100);
+    assert_eq!(table.stats().info.size, 100);
     assert_eq!(metrics.pushed_total("shm"), 100);
     shutdown.trigger();
     server.join().await.expect("clean stop");
@@ -129,7 +129,7 @@ async fn survives_a_restart(kind: ActorTransport) {
     }
     let table = server.table("t").expect("table");
     eventually(Duration::from_secs(20), "the first batches", || {
-        table.stats().size >= 20
+        table.stats().info.size >= 20
     })
     .await;
     eventually(Duration::from_secs(5), "their acknowledgements", || {
@@ -170,11 +170,11 @@ async fn survives_a_restart(kind: ActorTransport) {
     // What the buffer kept and the 2 new ones arrive; whatever did not fit
     // in the buffer is counted.
     eventually(Duration::from_secs(30), "pushes to resume", || {
-        table.stats().size + metrics.dropped_total("buffer_full") >= 70
+        table.stats().info.size + metrics.dropped_total("buffer_full") >= 70
     })
     .await;
     pusher.close(Duration::from_secs(5)).await;
-    let size = table.stats().size;
+    let size = table.stats().info.size;
     let dropped = metrics.dropped_total("buffer_full");
     assert!(size >= 30, "the buffer's batches and the new ones: {size}");
     assert_eq!(
@@ -225,7 +225,7 @@ async fn the_acting_loop_delivers_every_transition_it_assembles() {
     pusher.close(Duration::from_secs(10)).await;
     let table = server.table("t").expect("table");
     assert_eq!(
-        table.stats().size,
+        table.stats().info.size,
         report.transitions,
         "full batches and the last partial one"
     );
@@ -268,7 +268,7 @@ async fn a_rate_limited_replay_slows_the_actor_instead_of_losing_batches() {
         || metrics.backpressure_seconds.get() > 1.0,
     )
     .await;
-    let held = table.stats().size;
+    let held = table.stats().info.size;
     assert!(held <= 100 + 200 + 24, "the rate limiter let {held} in");
     let steps = metrics.env_steps_total();
     // This sleep is the test: over half a second the actor, held back,

@@ -400,7 +400,7 @@ async fn callers_that_go_away_do_not_wedge_the_server() {
     let mut stream = c.insert_stream(2).await.expect("stream");
     stream.send(batch(0, 10, None)).await.expect("send");
     wait_until(WAIT, "the streamed batch to be stored", async || {
-        table.stats().size == 10
+        table.stats().info.size == 10
     })
     .await;
     drop(stream);
@@ -445,7 +445,7 @@ async fn shutdown_ends_open_streams_and_waiting_samples() {
     wait_until(
         WAIT,
         "the sample to wait for the minimum size",
-        async || table.stats().sample_waits == 1,
+        async || table.stats().limiter.sample_waits_total == 1,
     )
     .await;
     stop(server, shutdown).await;
@@ -551,6 +551,6 @@ async fn periodic_snapshots_are_written_and_a_renamed_table_refuses_to_start() {
     );
     config.replay.restore = false;
     let (server, shutdown, _r) = serve(&config).await;
-    assert_eq!(server.table("renamed").expect("table").stats().size, 0);
+    assert_eq!(server.table("renamed").expect("table").stats().info.size, 0);
     stop(server, shutdown).await;
 }

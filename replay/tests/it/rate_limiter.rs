@@ -35,11 +35,11 @@ async fn sampling_waits_for_the_minimum_size_then_proceeds() {
     wait_until(
         WAIT,
         "the sample to wait for the minimum size",
-        async || t.stats().sample_waits == 1,
+        async || t.stats().limiter.sample_waits_total == 1,
     )
     .await;
     assert!(!sampler.is_finished(), "5 of 10 inserted: the sample waits");
-    assert!(!t.stats().can_sample);
+    assert!(!t.stats().limiter.can_sample);
     t.insert(&prepared(5, 5, None), Duration::from_secs(1), &shutdown)
         .await
         .expect("insert");
@@ -49,7 +49,7 @@ async fn sampling_waits_for_the_minimum_size_then_proceeds() {
         .expect("task")
         .expect("sample");
     assert_eq!(s.keys.len(), 4);
-    assert_eq!(t.stats().sample_waits, 1);
+    assert_eq!(t.stats().limiter.sample_waits_total, 1);
 }
 
 #[tokio::test]
@@ -97,7 +97,7 @@ async fn inserts_wait_for_samples_under_a_ratio() {
         matches!(err, TableError::Timeout { op: "insert", .. }),
         "{err:?}"
     );
-    assert_eq!(t.stats().size, 8, "the refused batch was not stored");
+    assert_eq!(t.stats().info.size, 8, "the refused batch was not stored");
     let inserter = {
         let t = t.clone();
         let shutdown = shutdown.clone();
@@ -108,7 +108,7 @@ async fn inserts_wait_for_samples_under_a_ratio() {
     };
     // The refused insert above waited once; this one is the second.
     wait_until(WAIT, "the insert to wait for samples", async || {
-        t.stats().insert_waits == 2
+        t.stats().limiter.insert_waits_total == 2
     })
     .await;
     assert!(!inserter.is_finished());
@@ -134,7 +134,7 @@ async fn inserts_wait_for_samples_under_a_ratio() {
     );
     let stats = t.stats();
     assert!(
-        stats.insert_waits >= 2 && stats.sample_waits >= 1,
+        stats.limiter.insert_waits_total >= 2 && stats.limiter.sample_waits_total >= 1,
         "{stats:?}"
     );
 }
@@ -149,7 +149,7 @@ async fn a_caller_that_goes_away_mid_wait_leaves_the_table_usable() {
         tokio::spawn(async move { t.sample(1, 0.0, Duration::from_secs(3600), &shutdown).await })
     };
     wait_until(WAIT, "the sample to wait", async || {
-        t.stats().sample_waits == 1
+        t.stats().limiter.sample_waits_total == 1
     })
     .await;
     waiter.abort();
@@ -177,7 +177,7 @@ async fn shutdown_ends_a_wait() {
         tokio::spawn(async move { t.sample(1, 0.0, Duration::from_secs(3600), &shutdown).await })
     };
     wait_until(WAIT, "the sample to wait", async || {
-        t.stats().sample_waits == 1
+        t.stats().limiter.sample_waits_total == 1
     })
     .await;
     shutdown.trigger();

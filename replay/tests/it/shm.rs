@@ -109,11 +109,11 @@ async fn batches_from_another_process_land_in_the_table() {
 
     let table = server.table("t").expect("table");
     let start = Instant::now();
-    while table.stats().size < 50 {
+    while table.stats().info.size < 50 {
         assert!(
             start.elapsed() < Duration::from_secs(10),
             "only {} items arrived",
-            table.stats().size
+            table.stats().info.size
         );
         tokio::time::sleep(Duration::from_millis(10)).await;
     }

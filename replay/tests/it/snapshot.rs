@@ -59,20 +59,20 @@ async fn round_trip_restores_items_keys_priorities_and_counters() {
     let (a, b) = (restored.stats(), t.stats());
     assert_eq!(
         (
-            a.size,
+            a.info.size,
             a.next_key,
-            a.inserts_total,
-            a.samples_total,
-            a.priority_updates_total,
-            a.ignored_updates_total
+            a.info.inserts_total,
+            a.info.samples_total,
+            a.info.priority_updates_total,
+            a.info.ignored_updates_total
         ),
         (
-            b.size,
+            b.info.size,
             b.next_key,
-            b.inserts_total,
-            b.samples_total,
-            b.priority_updates_total,
-            b.ignored_updates_total
+            b.info.inserts_total,
+            b.info.samples_total,
+            b.info.priority_updates_total,
+            b.info.ignored_updates_total
         ),
     );
     // Keys go on where they stopped; evicted ones stay ignored.

@@ -129,7 +129,10 @@ async fn eviction_is_first_in_first_out_and_updates_for_evicted_keys_are_ignored
         insert(&t, tag, 1, None).await;
     }
     let stats = t.stats();
-    assert_eq!((stats.size, stats.inserts_total, stats.next_key), (5, 8, 8));
+    assert_eq!(
+        (stats.info.size, stats.info.inserts_total, stats.next_key),
+        (5, 8, 8)
+    );
     let image = t.image();
     assert_eq!(
         image.items.rewards,
@@ -145,7 +148,10 @@ async fn eviction_is_first_in_first_out_and_updates_for_evicted_keys_are_ignored
     assert_eq!((done.updated, done.ignored), (2, 3));
     let stats = t.stats();
     assert_eq!(
-        (stats.priority_updates_total, stats.ignored_updates_total),
+        (
+            stats.info.priority_updates_total,
+            stats.info.ignored_updates_total
+        ),
         (2, 3)
     );
     assert_eq!(t.image().items.priorities, vec![1.0, 1.0, 5.0, 1.0, 0.0]);
@@ -196,21 +202,21 @@ async fn observations_are_stored_once_and_freed_with_their_items() {
     // previous batch's last next state, found and shared.
     insert(&t, 10, 10, None).await;
     assert_eq!(t.stats().observations, 21);
-    let bytes_half = t.stats().bytes;
+    let bytes_half = t.stats().info.bytes_stored;
     for round in 0..20u32 {
         insert(&t, 1000 + round * 10, 10, None).await;
     }
     let stats = t.stats();
-    assert_eq!(stats.size, 40);
+    assert_eq!(stats.info.size, 40);
     assert!(
         stats.observations <= 44,
         "{} observations for 40 items",
         stats.observations
     );
     assert!(
-        stats.bytes < bytes_half * 3,
+        stats.info.bytes_stored < bytes_half * 3,
         "memory follows the size: {} vs {bytes_half}",
-        stats.bytes
+        stats.info.bytes_stored
     );
 }
 
@@ -290,12 +296,12 @@ async fn actors_insert_while_the_learner_samples_and_updates() {
     }
     let ignored = learner.await.expect("learner");
     let stats = t.stats();
-    assert_eq!(stats.inserts_total, 4 * 100 * 16);
-    assert_eq!(stats.size, 500);
-    assert_eq!(stats.samples_total, 200 * 32);
-    assert_eq!(stats.ignored_updates_total, u64::from(ignored));
+    assert_eq!(stats.info.inserts_total, 4 * 100 * 16);
+    assert_eq!(stats.info.size, 500);
+    assert_eq!(stats.info.samples_total, 200 * 32);
+    assert_eq!(stats.info.ignored_updates_total, u64::from(ignored));
     assert_eq!(
-        stats.priority_updates_total + stats.ignored_updates_total,
+        stats.info.priority_updates_total + stats.info.ignored_updates_total,
         200 * 32
     );
 }

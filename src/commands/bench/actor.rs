@@ -218,7 +218,7 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         };
         let (t0, i0, s0, (c0, b0)) = (
             Instant::now(),
-            table.stats().inserts_total,
+            table.stats().info.inserts_total,
             metrics.env_steps_total(),
             passes_and_busy(),
         );
@@ -228,7 +228,7 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         }
         let dt = t0.elapsed().as_secs_f64();
         let (c1, b1) = passes_and_busy();
-        rates.push((table.stats().inserts_total - i0) as f64 / dt);
+        rates.push((table.stats().info.inserts_total - i0) as f64 / dt);
         steps.push((metrics.env_steps_total() - s0) as f64 / dt);
         passes.push((c1 - c0) as f64 / dt);
         inference.push((b1 - b0) / dt);
