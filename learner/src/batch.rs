@@ -52,16 +52,35 @@ impl TrainingBatch {
                 "importance weight {i} is {w}; expected finite and >= 0"
             )));
         }
-        Self::from_batch(&sampled.batch, &sampled.weights, sampled.keys.clone(), spec)
+        // A sample's batch is a `ValidBatch`, checked once on arrival.
+        Self::build(
+            &sampled.batch,
+            &sampled.weights,
+            sampled.keys.clone(),
+            spec,
+            false,
+        )
     }
 
     /// The tensors of `batch` with `weights` and `keys` (one each per
-    /// transition).
+    /// transition); the batch is validated first.
     pub fn from_batch(
         batch: &TransitionBatch,
         weights: &[f32],
         keys: Vec<u64>,
         spec: &NetworkSpec,
+    ) -> Result<Self, LearnerError> {
+        Self::build(batch, weights, keys, spec, true)
+    }
+
+    /// The tensors, after the checks that `batch` fits `spec`; `validate`
+    /// also checks the batch itself (unless it is already a `ValidBatch`).
+    fn build(
+        batch: &TransitionBatch,
+        weights: &[f32],
+        keys: Vec<u64>,
+        spec: &NetworkSpec,
+        validate: bool,
     ) -> Result<Self, LearnerError> {
         let n = batch.len();
         if n == 0 {
@@ -97,9 +116,11 @@ impl TrainingBatch {
                 batch.num_actions, spec.num_actions, spec.action_set
             )));
         }
-        batch
-            .validate()
-            .map_err(|e| LearnerError::Batch(e.to_string()))?;
+        if validate {
+            batch
+                .validate()
+                .map_err(|e| LearnerError::Batch(e.to_string()))?;
+        }
         let mut obs = vec![0f32; n * input];
         let mut next = vec![0f32; n * input];
         for i in 0..n {

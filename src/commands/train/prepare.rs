@@ -1,7 +1,6 @@
 //! Before a session starts: the run folder checked (a run already there
 //! needs `--resume`), the configuration derived for a local run (the
-//! observation resolved, the transports, the folder's checkpoints and
-//! snapshots) and written to `config.toml`, and the previous sessions'
+//! transports, the folder's checkpoints and snapshots) and written to `config.toml`, and the previous sessions'
 //! summary read.
 
 use std::path::{Path, PathBuf};
@@ -22,8 +21,8 @@ pub struct Run {
     pub previous: Summary,
 }
 
-/// Checks the folder, resolves the observation from the scenario and
-/// action set, and writes `config.toml`.
+/// Checks the folder, derives a local run's settings and writes
+/// `config.toml` (with the observation the command resolved).
 pub fn prepare(config: &Config, out: &Path, resume: bool) -> anyhow::Result<Run> {
     let mut c = config.clone();
     let scenario = Arc::new(
@@ -35,7 +34,7 @@ pub fn prepare(config: &Config, out: &Path, resume: bool) -> anyhow::Result<Run>
         .action_set
         .parse()
         .with_context(|| format!("sim.action_set {:?}", c.sim.action_set))?;
-    crossroads_actor::resolve_observation(&mut c.sim)?;
+    // `sim.observation` was resolved when the command loaded the config.
     c.actor.index = None;
     c.actor.eval = false;
     c.actor.transport = c.train.transport;
