@@ -70,8 +70,20 @@ pub struct ReplayConfig {
     pub snapshot_interval_secs: u64,
     /// Snapshots kept (the newest good ones); at least 1.
     pub snapshot_keep: u32,
-    /// Whether to restore the newest good snapshot at start.
+    /// Whether to restore the newest good snapshot at start (and replay
+    /// the write-ahead log on top of it).
     pub restore: bool,
+    /// Whether inserts are acknowledged only once they are in a write-ahead
+    /// log on disk (`<snapshot_dir>/wal`, fsynced in groups), so that an
+    /// acknowledged transition survives a kill -9 of the server. Needs
+    /// `snapshot_dir`; without one there is nothing to recover from.
+    pub wal: bool,
+    /// Longest an insert waits for others to share its fsync,
+    /// milliseconds (0: only those already queued share it). 0 to 1000.
+    pub wal_sync_ms: u64,
+    /// A group of log records this large is written and fsynced at once,
+    /// bytes. 4 KiB to 1 GiB.
+    pub wal_sync_bytes: usize,
     /// Whether to take batches over iceoryx2 shared memory from actors on
     /// this host (beside gRPC).
     pub shm_ingest: bool,
@@ -99,6 +111,9 @@ impl Default for ReplayConfig {
             snapshot_interval_secs: 300,
             snapshot_keep: 2,
             restore: true,
+            wal: true,
+            wal_sync_ms: 1,
+            wal_sync_bytes: 4 << 20,
             shm_ingest: true,
         }
     }
@@ -155,6 +170,8 @@ impl ReplayConfig {
             "must be at least 1".to_owned(),
         );
         problems.within("max_sample_batch", self.max_sample_batch, 1..=1 << 20);
+        problems.within("wal_sync_ms", self.wal_sync_ms, 0..=1000);
+        problems.within("wal_sync_bytes", self.wal_sync_bytes, 4 << 10..=1 << 30);
         problems.check(
             self.snapshot_keep >= 1,
             "snapshot_keep",

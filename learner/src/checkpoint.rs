@@ -47,6 +47,9 @@ pub const MANIFEST_FORMAT: &str = "crossroads.checkpoint";
 pub const MANIFEST_VERSION: u32 = 1;
 
 const TMP_PREFIX: &str = ".tmp-";
+/// The file of the version lease: the highest weights version a learner
+/// of this folder may have published.
+pub const VERSION_LEASE_FILE: &str = "versions.lease";
 
 /// Why a checkpoint operation failed.
 #[derive(Debug, thiserror::Error)]
@@ -281,6 +284,38 @@ impl CheckpointStore {
     /// The directory.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// The version lease: no learner of this folder published a weights
+    /// version above it (0 when none was leased). A learner killed at any
+    /// moment restarts above it, so versions only ever increase.
+    pub fn version_lease(&self) -> Result<u64, StoreError> {
+        let path = self.dir.join(VERSION_LEASE_FILE);
+        let text = match fs::read_to_string(&path) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+            Err(e) => return Err(io("reading", &path)(e)),
+        };
+        text.trim().parse().map_err(|_| StoreError::Corrupt {
+            id: VERSION_LEASE_FILE.to_owned(),
+            problem: format!(
+                "{} holds {:?}, not a version number; remove it only if no learner of this \
+                 folder published weights (versions would repeat)",
+                path.display(),
+                text.trim()
+            ),
+        })
+    }
+
+    /// Records, durably, that versions up to `upto` may be published: a
+    /// temporary file, fsynced, renamed over the lease, the folder fsynced.
+    /// A crash leaves the old lease or the new one, never a partial file.
+    pub fn lease_versions(&self, upto: u64) -> Result<(), StoreError> {
+        let path = self.dir.join(VERSION_LEASE_FILE);
+        let tmp = self.dir.join(format!(".{VERSION_LEASE_FILE}.tmp"));
+        write_synced(&tmp, format!("{upto}\n").as_bytes())?;
+        fs::rename(&tmp, &path).map_err(io("renaming into place", &path))?;
+        sync_dir(&self.dir)
     }
 
     /// The folder of checkpoint `id`: INVALID for an id that is not a plain

@@ -116,9 +116,14 @@ pub struct Learner {
     shared: Arc<Shared>,
     shm: Option<ShmWeightsPublisher>,
     version: u64,
+    /// Versions up to this are leased in the checkpoint folder.
+    leased: u64,
     eval: (u64, BTreeMap<String, f64>),
     rate: (Instant, u64),
 }
+
+/// Versions leased at a time: one fsync per this many publications.
+pub const VERSION_LEASE: u64 = 1024;
 
 impl std::fmt::Debug for Learner {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -161,9 +166,17 @@ impl Learner {
             shared,
             shm,
             version: 0,
+            leased: 0,
             eval: (0, BTreeMap::new()),
             rate: (Instant::now(), 0),
         };
+        // Above every version a learner of this folder may have published,
+        // whether or not it resumes (a kill -9 may have come after
+        // publications its last checkpoint does not know of).
+        if let Some(store) = &learner.shared.store {
+            learner.leased = store.version_lease()?;
+            learner.version = learner.leased;
+        }
         if learner.shared.config.learner.resume {
             learner.resume()?;
         }
@@ -196,7 +209,7 @@ impl Learner {
                         )));
                     }
                     self.trainer.restore(loaded.state)?;
-                    self.version = loaded.manifest.weights_version;
+                    self.version = self.version.max(loaded.manifest.weights_version);
                     self.eval = (
                         loaded.manifest.eval_weights_version,
                         loaded.manifest.eval_metrics.clone(),
@@ -355,9 +368,20 @@ impl Learner {
         Ok(())
     }
 
-    /// Publishes the online network under the next version.
+    /// Publishes the online network under the next version. With a
+    /// checkpoint folder, versions are leased there first, a block at a
+    /// time ([`VERSION_LEASE`]), so a learner killed at any moment restarts
+    /// above every version it published; when the lease cannot be written
+    /// (a full disk), nothing is published and the error is returned.
     pub fn publish(&mut self) -> Result<(), LearnerError> {
         let version = self.version + 1;
+        if let Some(store) = &self.shared.store
+            && version > self.leased
+        {
+            let upto = version + VERSION_LEASE;
+            store.lease_versions(upto)?;
+            self.leased = upto;
+        }
         let weights = Weights {
             version,
             update_step: self.trainer.step(),

@@ -257,6 +257,11 @@ fn handle(
         return reject(e);
     }
     let prepared = PreparedBatch::new(batch);
+    if let Err(e) = state.check_durable() {
+        state.metrics.reject(RejectReason::Unavailable);
+        tracing::warn!(table = table.name(), batch_id, error = %e, "refused a shared-memory batch");
+        return Err(RejectReason::Unavailable);
+    }
     let mut now = draining;
     loop {
         let outcome = if now {
@@ -266,6 +271,14 @@ fn handle(
         };
         match outcome {
             Ok(done) => {
+                if let Some(pending) = state.log(table, &prepared, &done)
+                    && let Err(e) = pending.wait_durable()
+                {
+                    state.metrics.reject(RejectReason::Unavailable);
+                    tracing::error!(table = table.name(), batch_id, error = %e,
+                        "a shared-memory batch is in the table but not durable; not acknowledged");
+                    return Err(RejectReason::Unavailable);
+                }
                 table
                     .metrics()
                     .inserted(Transport::Shm, u64::from(done.inserted));

@@ -6,7 +6,8 @@
 //! [`ObservationStore`](storage::ObservationStore); a
 //! [`RateLimiter`](rate_limiter::RateLimiter) decides when inserts and
 //! samples may proceed. [`snapshot`] writes and restores tables atomically
-//! with a checksum. The server ([`server::start`], [`server::run`]) serves
+//! with a checksum; the write-ahead log ([`wal`]) makes every acknowledged
+//! insert durable between snapshots. The server ([`server::start`], [`server::run`]) serves
 //! the tables over gRPC (the `service` module, the tonic service) and takes
 //! batches from actors on the same host over iceoryx2 (the `ingest`
 //! module), with the `crossroads_replay_*` metrics of [`metrics`].
@@ -32,6 +33,7 @@ pub mod snapshot;
 pub mod storage;
 pub mod sum_tree;
 pub mod table;
+pub mod wal;
 
 pub use metrics::{ReplayMetrics, TableMetrics};
 pub use server::{RunningServer, ServerError, run, start};

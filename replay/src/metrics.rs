@@ -17,6 +17,10 @@
 //! | `crossroads_replay_snapshot_duration_seconds` | gauge (last) | |
 //! | `crossroads_replay_snapshot_bytes` | gauge (last) | |
 //! | `crossroads_replay_snapshot_age_seconds` | gauge, at scrape | |
+//! | `crossroads_replay_wal_records_total` | counter (batches made durable) | |
+//! | `crossroads_replay_wal_bytes_total` | counter | |
+//! | `crossroads_replay_wal_sync_seconds` | histogram (write and fsync of a group) | |
+//! | `crossroads_replay_wal_errors_total` | counter (failed groups) | |
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -52,6 +56,14 @@ pub struct ReplayMetrics {
     pub snapshot_bytes: IntGauge,
     /// When the last snapshot was written (or restored), Unix ms; 0 if none.
     pub last_snapshot_unix_ms: Arc<AtomicU64>,
+    /// Write-ahead-log records (inserted batches) made durable.
+    pub wal_records: IntCounter,
+    /// Bytes written to the write-ahead log.
+    pub wal_bytes: IntCounter,
+    /// Time to write and fsync one group of records.
+    pub wal_sync_seconds: Histogram,
+    /// Groups of records that could not be written (a full disk, say).
+    pub wal_errors: IntCounter,
 }
 
 impl ReplayMetrics {
@@ -136,6 +148,25 @@ impl ReplayMetrics {
                 "Size of the last snapshot written",
             )?,
             last_snapshot_unix_ms: Arc::new(AtomicU64::new(0)),
+            wal_records: IntCounter::new(
+                "crossroads_replay_wal_records_total",
+                "Inserted batches made durable in the write-ahead log",
+            )?,
+            wal_bytes: IntCounter::new(
+                "crossroads_replay_wal_bytes_total",
+                "Bytes written to the write-ahead log",
+            )?,
+            wal_sync_seconds: Histogram::with_opts(
+                HistogramOpts::new(
+                    "crossroads_replay_wal_sync_seconds",
+                    "Time to write and fsync one group of write-ahead-log records",
+                )
+                .buckets(vec![0.0005, 0.001, 0.002, 0.005, 0.01, 0.05, 0.25, 1.0]),
+            )?,
+            wal_errors: IntCounter::new(
+                "crossroads_replay_wal_errors_total",
+                "Groups of write-ahead-log records that could not be written (their inserts failed)",
+            )?,
         };
         for reason in RejectReason::ALL {
             m.rejections.with_label_values(&[reason.as_str()]);
@@ -159,6 +190,10 @@ impl ReplayMetrics {
             r.register(Box::new(m.snapshot_duration.clone()))?;
             r.register(Box::new(m.snapshot_bytes.clone()))?;
             r.register(Box::new(SnapshotAge::new(m.last_snapshot_unix_ms.clone())?))?;
+            r.register(Box::new(m.wal_records.clone()))?;
+            r.register(Box::new(m.wal_bytes.clone()))?;
+            r.register(Box::new(m.wal_sync_seconds.clone()))?;
+            r.register(Box::new(m.wal_errors.clone()))?;
         }
         Ok(m)
     }

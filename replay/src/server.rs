@@ -30,6 +30,7 @@ use crate::roster::Roster;
 use crate::service::{Limits, ReplayService, State};
 use crate::snapshot::{SnapshotError, Snapshots};
 use crate::table::{Table, TableConfig};
+use crate::wal::{self, Wal, WalConfig, WalError};
 
 /// Longest the gRPC server may take to drain after shutdown before its
 /// connections are dropped.
@@ -52,6 +53,9 @@ pub enum ServerError {
     /// A snapshot could not be restored or written.
     #[error(transparent)]
     Snapshot(#[from] SnapshotError),
+    /// The write-ahead log could not be replayed or opened.
+    #[error(transparent)]
+    Wal(#[from] WalError),
     /// A snapshot's table does not fit the configured one.
     #[error("cannot restore table {table:?} from {path}: {problem}")]
     Restore {
@@ -115,17 +119,13 @@ pub async fn start(
     let mut tables = BTreeMap::new();
     tables.insert(rc.table.clone(), table);
 
-    let snapshots = match &rc.snapshot_dir {
-        Some(dir) => Some(Arc::new(Snapshots::new(
-            dir.clone(),
-            rc.snapshot_keep as usize,
-            metrics.clone(),
-        )?)),
-        None => None,
+    let (snapshots, wal) = match &rc.snapshot_dir {
+        Some(dir) => {
+            let (snapshots, wal) = recover(config, dir, &tables, &metrics).await?;
+            (Some(snapshots), wal)
+        }
+        None => (None, None),
     };
-    if let (Some(snapshots), true) = (&snapshots, rc.restore) {
-        restore(snapshots, &tables).await?;
-    }
 
     let listener = TcpListener::bind(rc.listen)
         .await
@@ -142,6 +142,7 @@ pub async fn start(
         tables,
         metrics,
         snapshots: snapshots.clone(),
+        wal,
         limits: Limits {
             insert_timeout: Duration::from_millis(rc.insert_timeout_ms),
             sample_timeout: Duration::from_millis(rc.sample_timeout_ms),
@@ -227,6 +228,78 @@ pub async fn run(
     shutdown: Shutdown,
 ) -> Result<(), ServerError> {
     start(config, registry, shutdown).await?.join().await
+}
+
+/// Opens the snapshots in `dir` and the write-ahead log beside them,
+/// restores the newest snapshot and replays the log on top (when
+/// `replay.restore`), and writes a snapshot at once if the log added
+/// anything, so the log starts again from empty. A log that will not be
+/// replayed (restore or the log off) is set aside, never replayed later.
+async fn recover(
+    config: &Config,
+    dir: &std::path::Path,
+    tables: &BTreeMap<String, Arc<Table>>,
+    metrics: &ReplayMetrics,
+) -> Result<(Arc<Snapshots>, Option<Arc<Wal>>), ServerError> {
+    let rc = &config.replay;
+    let snapshots = Arc::new(Snapshots::new(
+        dir.to_path_buf(),
+        rc.snapshot_keep as usize,
+        metrics.clone(),
+    )?);
+    let wal_dir = dir.join("wal");
+    let replayed = if rc.restore {
+        restore(&snapshots, tables).await?;
+        if rc.wal {
+            let (d, t) = (wal_dir.clone(), tables.clone());
+            Some(
+                tokio::task::spawn_blocking(move || wal::replay_into(&d, &t))
+                    .await
+                    .map_err(|e| ServerError::Serve(format!("log replay task: {e}")))??,
+            )
+        } else {
+            None
+        }
+    } else {
+        None
+    };
+    if replayed.is_none() {
+        let aside = wal::set_aside(&wal_dir)?;
+        if aside > 0 {
+            tracing::warn!(dir = %wal_dir.display(), segments = aside,
+                "write-ahead log not replayed (replay.restore or replay.wal is off); set aside as *.skipped");
+        }
+    }
+    if !rc.wal {
+        return Ok((snapshots, None));
+    }
+    let wal = Arc::new(Wal::open(
+        WalConfig {
+            dir: wal_dir,
+            sync_interval: Duration::from_millis(rc.wal_sync_ms),
+            sync_bytes: rc.wal_sync_bytes,
+        },
+        metrics.clone(),
+    )?);
+    snapshots.attach_wal(wal.clone());
+    if let Some(r) = replayed.filter(|r| r.batches > 0) {
+        tracing::info!(
+            segments = r.segments,
+            batches = r.batches,
+            transitions = r.transitions,
+            already_in_snapshot = r.covered,
+            torn_segments = r.torn,
+            "replayed the write-ahead log; writing a snapshot that holds it"
+        );
+        let (s, t) = (
+            snapshots.clone(),
+            tables.values().cloned().collect::<Vec<_>>(),
+        );
+        tokio::task::spawn_blocking(move || s.write(&t))
+            .await
+            .map_err(|e| ServerError::Serve(format!("snapshot task: {e}")))??;
+    }
+    Ok((snapshots, Some(wal)))
 }
 
 async fn restore(

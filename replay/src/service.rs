@@ -28,7 +28,8 @@ use tonic::{Request, Response, Status, Streaming};
 use crate::metrics::{ReplayMetrics, Transport};
 use crate::roster::Roster;
 use crate::snapshot::Snapshots;
-use crate::table::{PreparedBatch, Table, TableError};
+use crate::table::{Inserted, PreparedBatch, Table, TableError};
+use crate::wal::{Pending, Wal, WalError};
 
 /// Longest wait a sample request may ask for.
 const MAX_SAMPLE_WAIT: Duration = Duration::from_secs(600);
@@ -97,6 +98,8 @@ pub(crate) struct State {
     pub(crate) metrics: ReplayMetrics,
     /// Snapshot writer, when a directory is configured.
     pub(crate) snapshots: Option<Arc<Snapshots>>,
+    /// The write-ahead log, when on: inserts are acknowledged once in it.
+    pub(crate) wal: Option<Arc<Wal>>,
     /// Per-call limits.
     pub(crate) limits: Limits,
     /// Fires when the server stops.
@@ -143,6 +146,25 @@ impl State {
         }
     }
 
+    /// Refuses an insert, before the table changes, while the write-ahead
+    /// log cannot write.
+    pub(crate) fn check_durable(&self) -> Result<(), WalError> {
+        self.wal.as_ref().map_or(Ok(()), |w| w.check_writable())
+    }
+
+    /// Puts an inserted batch in the write-ahead log (when on); wait on
+    /// the answer before acknowledging.
+    pub(crate) fn log(
+        &self,
+        table: &Table,
+        batch: &PreparedBatch,
+        done: &Inserted,
+    ) -> Option<Pending> {
+        self.wal
+            .as_ref()
+            .map(|w| w.append(table.name(), batch, done.first_key))
+    }
+
     fn status(&self, e: TableError) -> Status {
         match e {
             TableError::Invalid(e) => self.reject(&e),
@@ -167,10 +189,22 @@ impl State {
         )?;
         let batch = self.accept(wire::batch_from_wire(batch).map_err(|e| e.within("batch")))?;
         let prepared = PreparedBatch::new(batch);
+        self.check_durable().map_err(|e| {
+            self.metrics.reject(RejectReason::Unavailable);
+            Status::unavailable(e.to_string())
+        })?;
         let done = table
             .insert(&prepared, self.limits.insert_timeout, &self.shutdown)
             .await
             .map_err(|e| self.status(e))?;
+        if let Some(pending) = self.log(table, &prepared, &done) {
+            pending.durable().await.map_err(|e| {
+                self.metrics.reject(RejectReason::Unavailable);
+                Status::unavailable(format!(
+                    "{e}; the batch is in the table but not durable, so not acknowledged"
+                ))
+            })?;
+        }
         table
             .metrics()
             .inserted(Transport::Grpc, u64::from(done.inserted));

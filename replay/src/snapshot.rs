@@ -26,6 +26,7 @@ use crossroads_types::columns::{Columns, ROW_BYTES};
 
 use crate::metrics::ReplayMetrics;
 use crate::table::{Table, TableImage};
+use crate::wal::{Wal, WalError};
 
 /// First bytes of every snapshot.
 pub const MAGIC: &[u8; 8] = b"CRRPLSNP";
@@ -56,6 +57,9 @@ pub enum SnapshotError {
         /// What is wrong: truncated, checksum mismatch, unknown version...
         problem: String,
     },
+    /// The write-ahead log could not be sealed before the copy.
+    #[error(transparent)]
+    Wal(#[from] WalError),
     /// Snapshots exist but none is valid; starting empty would silently
     /// lose them.
     #[error(
@@ -94,40 +98,7 @@ pub fn encode(tables: &[(String, TableImage)]) -> Vec<u8> {
     let mut body = Vec::new();
     put_u32(&mut body, tables.len() as u32);
     for (name, t) in tables {
-        put_str(&mut body, name);
-        match &t.spec {
-            Some((spec, actions)) => {
-                body.push(1);
-                put_str(&mut body, &spec.kind);
-                put_u32(&mut body, spec.shape.len() as u32);
-                spec.shape.iter().for_each(|d| put_u32(&mut body, *d));
-                put_u32(&mut body, *actions);
-            }
-            None => body.push(0),
-        }
-        // Format 1 stores the insert and sample counts twice (once more as
-        // the rate limiter's, which are the same counts).
-        for v in [
-            t.next_key,
-            t.inserts_total,
-            t.samples_total,
-            t.priority_updates_total,
-            t.ignored_updates_total,
-            t.inserts_total,
-            t.samples_total,
-            t.len() as u64,
-        ] {
-            put_u64(&mut body, v);
-        }
-        let start = body.len();
-        body.resize(start + t.items.byte_len(), 0);
-        t.items.write_le(&mut body[start..]);
-        put_u64(&mut body, t.observation_offsets.len() as u64);
-        t.observation_offsets
-            .iter()
-            .for_each(|v| put_u64(&mut body, *v));
-        put_u64(&mut body, t.observation_data.len() as u64);
-        body.extend_from_slice(&t.observation_data);
+        encode_table(&mut body, name, t);
     }
     let mut file = Vec::with_capacity(HEADER_LEN + body.len());
     file.extend_from_slice(MAGIC);
@@ -139,6 +110,43 @@ pub fn encode(tables: &[(String, TableImage)]) -> Vec<u8> {
     put_u32(&mut file, header_crc);
     file.extend_from_slice(&body);
     file
+}
+
+/// Appends one table's name and image (the body of a snapshot holds one
+/// per table; a write-ahead-log record holds one batch as a small image).
+pub(crate) fn encode_table(body: &mut Vec<u8>, name: &str, t: &TableImage) {
+    put_str(body, name);
+    match &t.spec {
+        Some((spec, actions)) => {
+            body.push(1);
+            put_str(body, &spec.kind);
+            put_u32(body, spec.shape.len() as u32);
+            spec.shape.iter().for_each(|d| put_u32(body, *d));
+            put_u32(body, *actions);
+        }
+        None => body.push(0),
+    }
+    // Format 1 stores the insert and sample counts twice (once more as
+    // the rate limiter's, which are the same counts).
+    for v in [
+        t.next_key,
+        t.inserts_total,
+        t.samples_total,
+        t.priority_updates_total,
+        t.ignored_updates_total,
+        t.inserts_total,
+        t.samples_total,
+        t.len() as u64,
+    ] {
+        put_u64(body, v);
+    }
+    let start = body.len();
+    body.resize(start + t.items.byte_len(), 0);
+    t.items.write_le(&mut body[start..]);
+    put_u64(body, t.observation_offsets.len() as u64);
+    t.observation_offsets.iter().for_each(|v| put_u64(body, *v));
+    put_u64(body, t.observation_data.len() as u64);
+    body.extend_from_slice(&t.observation_data);
 }
 
 /// Decodes a snapshot file's bytes; every length is checked, so a damaged
@@ -182,48 +190,54 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<(String, TableImage)>, String> {
     let n_tables = r.u32()?;
     let mut tables = Vec::new();
     for _ in 0..n_tables {
-        let name = r.str()?;
-        let spec = match r.u8()? {
-            0 => None,
-            1 => {
-                let kind = r.str()?;
-                let rank = r.u32()? as usize;
-                let shape = r.u32s(rank)?;
-                let actions = r.u32()?;
-                Some((ObservationSpec::new(kind, shape), actions))
-            }
-            other => return Err(format!("table {name}: bad spec flag {other}")),
-        };
-        let mut image = TableImage {
-            spec,
-            next_key: r.u64()?,
-            inserts_total: r.u64()?,
-            samples_total: r.u64()?,
-            priority_updates_total: r.u64()?,
-            ignored_updates_total: r.u64()?,
-            ..TableImage::default()
-        };
-        // The same counts again, as the rate limiter's (see `encode`).
-        let _limiter_counts = (r.u64()?, r.u64()?);
-        let n = r.len(ROW_BYTES)?;
-        image.items = Columns::read_le(r.bytes(n * ROW_BYTES)?).ok_or("rows of 24 bytes")?;
-        let n_obs = r.len(8)?;
-        image.observation_offsets = (0..n_obs).map(|_| r.u64()).collect::<Result<_, _>>()?;
-        let data_len = r.len(1)?;
-        image.observation_data = r.bytes(data_len)?.to_vec();
-        let mut previous = 0;
-        for (i, off) in image.observation_offsets.iter().enumerate() {
-            if *off < previous || *off > data_len as u64 {
-                return Err(format!("table {name}: observation offset {i} out of order"));
-            }
-            previous = *off;
-        }
-        tables.push((name, image));
+        tables.push(decode_table(&mut r)?);
     }
     if r.remaining() != 0 {
         return Err(format!("{} bytes after the last table", r.remaining()));
     }
     Ok(tables)
+}
+
+/// Reads one table's name and image, as [`encode_table`] wrote it;
+/// every length and offset is checked.
+pub(crate) fn decode_table(r: &mut Reader<'_>) -> Result<(String, TableImage), String> {
+    let name = r.str()?;
+    let spec = match r.u8()? {
+        0 => None,
+        1 => {
+            let kind = r.str()?;
+            let rank = r.u32()? as usize;
+            let shape = r.u32s(rank)?;
+            let actions = r.u32()?;
+            Some((ObservationSpec::new(kind, shape), actions))
+        }
+        other => return Err(format!("table {name}: bad spec flag {other}")),
+    };
+    let mut image = TableImage {
+        spec,
+        next_key: r.u64()?,
+        inserts_total: r.u64()?,
+        samples_total: r.u64()?,
+        priority_updates_total: r.u64()?,
+        ignored_updates_total: r.u64()?,
+        ..TableImage::default()
+    };
+    // The same counts again, as the rate limiter's (see `encode_table`).
+    let _limiter_counts = (r.u64()?, r.u64()?);
+    let n = r.len(ROW_BYTES)?;
+    image.items = Columns::read_le(r.bytes(n * ROW_BYTES)?).ok_or("rows of 24 bytes")?;
+    let n_obs = r.len(8)?;
+    image.observation_offsets = (0..n_obs).map(|_| r.u64()).collect::<Result<_, _>>()?;
+    let data_len = r.len(1)?;
+    image.observation_data = r.bytes(data_len)?.to_vec();
+    let mut previous = 0;
+    for (i, off) in image.observation_offsets.iter().enumerate() {
+        if *off < previous || *off > data_len as u64 {
+            return Err(format!("table {name}: observation offset {i} out of order"));
+        }
+        previous = *off;
+    }
+    Ok((name, image))
 }
 
 /// Reads and checks one snapshot file.
@@ -247,6 +261,8 @@ pub struct Snapshots {
     dir: PathBuf,
     keep: usize,
     metrics: ReplayMetrics,
+    /// The write-ahead log each snapshot seals and, once written, trims.
+    wal: std::sync::OnceLock<Arc<Wal>>,
     /// One writer at a time (periodic, on request, at shutdown).
     writing: std::sync::Mutex<()>,
 }
@@ -267,8 +283,16 @@ impl Snapshots {
             dir,
             keep: keep.max(1),
             metrics,
+            wal: std::sync::OnceLock::new(),
             writing: std::sync::Mutex::new(()),
         })
+    }
+
+    /// From now on, seals `wal` before each copy and deletes the sealed
+    /// segments once the snapshot is written and reads back. Once only: a
+    /// second log is ignored.
+    pub fn attach_wal(&self, wal: Arc<Wal>) {
+        let _ = self.wal.set(wal);
     }
 
     /// The directory.
@@ -340,6 +364,9 @@ impl Snapshots {
     }
 
     fn write_inner(&self, tables: &[Arc<Table>], start: Instant) -> Result<Written, SnapshotError> {
+        // Every record in a sealed segment was inserted before the copy
+        // below, so the snapshot holds it.
+        let sealed = self.wal.get().map(|w| w.rotate()).transpose()?;
         let images: Vec<(String, TableImage)> = tables
             .iter()
             .map(|t| (t.name().to_owned(), t.image()))
@@ -369,6 +396,13 @@ impl Snapshots {
         for (_, old) in self.list()?.into_iter().skip(self.keep) {
             if let Err(e) = fs::remove_file(&old) {
                 tracing::warn!(path = %old.display(), error = %e, "cannot prune old snapshot");
+            }
+        }
+        if let (Some(wal), Some(seq)) = (self.wal.get(), sealed) {
+            // Segments left behind are read again at start, their records
+            // found in this snapshot by key: harmless.
+            if let Err(e) = wal.delete_through(seq) {
+                tracing::warn!(error = %e, "cannot delete write-ahead-log segments the snapshot holds");
             }
         }
         Ok(Written {
@@ -420,11 +454,11 @@ impl Snapshots {
     }
 }
 
-fn put_u32(out: &mut Vec<u8>, v: u32) {
+pub(crate) fn put_u32(out: &mut Vec<u8>, v: u32) {
     out.extend_from_slice(&v.to_le_bytes());
 }
 
-fn put_u64(out: &mut Vec<u8>, v: u64) {
+pub(crate) fn put_u64(out: &mut Vec<u8>, v: u64) {
     out.extend_from_slice(&v.to_le_bytes());
 }
 
@@ -434,21 +468,21 @@ fn put_str(out: &mut Vec<u8>, s: &str) {
 }
 
 /// A bounds-checked cursor.
-struct Reader<'a> {
+pub(crate) struct Reader<'a> {
     bytes: &'a [u8],
     at: usize,
 }
 
 impl<'a> Reader<'a> {
-    fn new(bytes: &'a [u8]) -> Self {
+    pub(crate) fn new(bytes: &'a [u8]) -> Self {
         Self { bytes, at: 0 }
     }
 
-    fn remaining(&self) -> usize {
+    pub(crate) fn remaining(&self) -> usize {
         self.bytes.len() - self.at
     }
 
-    fn bytes(&mut self, n: usize) -> Result<&'a [u8], String> {
+    pub(crate) fn bytes(&mut self, n: usize) -> Result<&'a [u8], String> {
         let end = self
             .at
             .checked_add(n)
@@ -469,12 +503,12 @@ impl<'a> Reader<'a> {
         Ok(self.bytes(1)?[0])
     }
 
-    fn u32(&mut self) -> Result<u32, String> {
+    pub(crate) fn u32(&mut self) -> Result<u32, String> {
         let b = self.bytes(4)?;
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     }
 
-    fn u64(&mut self) -> Result<u64, String> {
+    pub(crate) fn u64(&mut self) -> Result<u64, String> {
         let b = self.bytes(8)?;
         let mut a = [0; 8];
         a.copy_from_slice(b);

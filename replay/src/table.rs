@@ -153,6 +153,57 @@ impl PreparedBatch {
         }
     }
 
+    /// The batch as a small image whose items take keys `first_key..`
+    /// (what the write-ahead log stores; counters zero).
+    pub fn to_image(&self, first_key: u64) -> TableImage {
+        TableImage {
+            spec: Some((self.spec.clone(), self.num_actions)),
+            next_key: first_key + self.len() as u64,
+            items: self.columns.clone(),
+            observation_offsets: self.entries.iter().map(|(_, s, _)| *s as u64).collect(),
+            observation_data: self.bytes.clone(),
+            ..TableImage::default()
+        }
+    }
+
+    /// The batch an image made by [`to_image`](Self::to_image) holds, and
+    /// its first key; an image that does not hold together, or has no
+    /// spec, is refused.
+    pub fn from_image(image: TableImage) -> Result<(u64, Self), BatchError> {
+        image.check()?;
+        let Some((spec, num_actions)) = image.spec.clone() else {
+            return Err(BatchError::new(
+                RejectReason::BadRequest,
+                "spec",
+                "a batch image must state its observation spec",
+            ));
+        };
+        let n_obs = image.observation_offsets.len();
+        let mut entries = Vec::with_capacity(n_obs);
+        for i in 0..n_obs {
+            let start = image.observation_offsets[i] as usize;
+            let bytes = image.observation(i).ok_or_else(|| {
+                BatchError::new(
+                    RejectReason::ObservationEncoding,
+                    format!("observations[{i}]"),
+                    "out of the data",
+                )
+            })?;
+            entries.push((content_hash(bytes), start, start + bytes.len()));
+        }
+        let first_key = image.next_key - image.len() as u64;
+        Ok((
+            first_key,
+            Self {
+                spec,
+                num_actions,
+                columns: image.items,
+                entries,
+                bytes: image.observation_data,
+            },
+        ))
+    }
+
     /// Transitions in the batch.
     pub fn len(&self) -> usize {
         self.columns.len()
@@ -246,6 +297,36 @@ impl TableImage {
     /// Whether it holds no item.
     pub fn is_empty(&self) -> bool {
         self.items.is_empty()
+    }
+
+    /// Whether the image holds together: columns of one length, keys that
+    /// fit, observations in range, priorities finite and not negative.
+    fn check(&self) -> Result<(), BatchError> {
+        let n = self.len();
+        if self.items.check_lengths().is_err() || self.next_key < n as u64 {
+            return Err(BatchError::new(
+                RejectReason::LengthMismatch,
+                "items",
+                "columns of different lengths",
+            ));
+        }
+        let n_obs = self.observation_offsets.len();
+        for (i, (o, no)) in self
+            .items
+            .observation_index
+            .iter()
+            .zip(&self.items.next_observation_index)
+            .enumerate()
+        {
+            if *o as usize >= n_obs || *no as usize >= n_obs {
+                return Err(BatchError::new(
+                    RejectReason::IndexRange,
+                    format!("items[{i}].observation"),
+                    format!("refers to observation {} of {n_obs}", (*o).max(*no)),
+                ));
+            }
+        }
+        check_priorities(&self.items.priorities, |i| format!("items[{i}].priority"))
     }
 
     fn observation(&self, i: usize) -> Option<&[u8]> {
@@ -510,31 +591,9 @@ impl Table {
     ///   limiter's counts (its waits start again from zero), the sampler's
     ///   seed and the gauges; wakes every waiting insert and sample.
     pub fn restore(&self, image: &TableImage) -> Result<usize, BatchError> {
+        image.check()?;
         let n = image.len();
-        if image.items.check_lengths().is_err() || image.next_key < n as u64 {
-            return Err(BatchError::new(
-                RejectReason::LengthMismatch,
-                "items",
-                "columns of different lengths",
-            ));
-        }
         let n_obs = image.observation_offsets.len();
-        for (i, (o, no)) in image
-            .items
-            .observation_index
-            .iter()
-            .zip(&image.items.next_observation_index)
-            .enumerate()
-        {
-            if *o as usize >= n_obs || *no as usize >= n_obs {
-                return Err(BatchError::new(
-                    RejectReason::IndexRange,
-                    format!("items[{i}].observation"),
-                    format!("refers to observation {} of {n_obs}", (*o).max(*no)),
-                ));
-            }
-        }
-        check_priorities(&image.items.priorities, |i| format!("items[{i}].priority"))?;
         let keep = n.min(self.config.capacity);
         let skip = n - keep;
         let oldest = image.next_key - n as u64 + skip as u64;

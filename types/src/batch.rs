@@ -458,11 +458,15 @@ pub enum RejectReason {
     /// Another malformed request field (batch size 0, beta outside [0, 1],
     /// keys and priorities of different lengths, a missing batch).
     BadRequest,
+    /// Well formed, but the server could not store it durably now (its
+    /// write-ahead log failed; a full disk, say): nothing acknowledged,
+    /// worth sending again later.
+    Unavailable,
 }
 
 impl RejectReason {
     /// Every reason, for pre-registering counters.
-    pub const ALL: [RejectReason; 15] = [
+    pub const ALL: [RejectReason; 16] = [
         RejectReason::Spec,
         RejectReason::EmptyBatch,
         RejectReason::LengthMismatch,
@@ -478,6 +482,7 @@ impl RejectReason {
         RejectReason::Oversized,
         RejectReason::UnknownTable,
         RejectReason::BadRequest,
+        RejectReason::Unavailable,
     ];
 
     /// The counter label, e.g. `non_finite_reward`.
@@ -498,6 +503,7 @@ impl RejectReason {
             RejectReason::Oversized => "oversized",
             RejectReason::UnknownTable => "unknown_table",
             RejectReason::BadRequest => "bad_request",
+            RejectReason::Unavailable => "unavailable",
         }
     }
 }

@@ -226,3 +226,22 @@ fn interrupted_writes_are_cleaned_up_and_corruption_is_detected() {
     assert!(matches!(err, StoreError::Corrupt { .. }), "{err}");
     assert!(err.to_string().contains("weights.safetensors"), "{err}");
 }
+
+#[test]
+fn the_version_lease_round_trips_and_a_damaged_one_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = CheckpointStore::open(dir.path(), 2, "success_rate").unwrap();
+    assert_eq!(store.version_lease().unwrap(), 0, "none leased yet");
+    store.lease_versions(2048).unwrap();
+    assert_eq!(store.version_lease().unwrap(), 2048);
+    store.lease_versions(4096).unwrap();
+    assert_eq!(store.version_lease().unwrap(), 4096);
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names, ["versions.lease"], "no temporary file left");
+    std::fs::write(dir.path().join("versions.lease"), "40\u{0}").unwrap();
+    let err = store.version_lease().unwrap_err().to_string();
+    assert!(err.contains("versions.lease") && err.contains("not a version"), "{err}");
+}

@@ -336,3 +336,54 @@ fn weights_reach_a_late_shared_memory_subscriber() {
     publisher.publish(&wrong).unwrap();
     assert_eq!(subscriber.latest().unwrap(), None);
 }
+
+/// What a kill -9 leaves on disk: the folder's files as they are now.
+fn crash_copy(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            crash_copy(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_learner_killed_past_its_last_checkpoint_restarts_above_every_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let live = dir.path().join("live");
+    let mut config = learner_config(&live);
+    // One checkpoint, at start; then only publications.
+    config.learner.checkpoint_every = 1_000_000;
+    let replay = replay_with_data(&config).await;
+    let first = start_learner(&config, &replay, None).await;
+    let c = client(&first, None);
+    wait_for_step(&c, 60).await;
+    let seen = c.status().await.unwrap().weights_version;
+    assert!(seen >= 60 / 5, "published {seen} versions");
+    let crashed = dir.path().join("crashed");
+    crash_copy(&live, &crashed);
+    first.stop();
+    first.join().await.unwrap();
+
+    let lease: u64 = std::fs::read_to_string(crashed.join("versions.lease"))
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    assert!(lease >= seen, "lease {lease} covers version {seen}");
+    let mut after = learner_config(&crashed);
+    after.learner.checkpoint_every = 1_000_000;
+    let second = start_learner(&after, &replay, None).await;
+    let status = client(&second, None).status().await.unwrap();
+    assert!(
+        status.weights_version > seen,
+        "restarted at version {} after {seen} was published",
+        status.weights_version
+    );
+    second.stop();
+    second.join().await.unwrap();
+}

@@ -6,3 +6,4 @@ mod shm;
 mod snapshot;
 mod table;
 mod util;
+mod wal;
