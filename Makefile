@@ -6,7 +6,7 @@
 CARGO ?= cargo
 RUN_ARGS ?=
 
-.PHONY: all setup pydeps deploydeps build run test lint fmt clean-libtorch bench-learner sumo-check
+.PHONY: all setup pydeps deploydeps build run test faults lint fmt clean-libtorch bench-learner sumo-check
 
 all: build
 
@@ -33,11 +33,14 @@ deploydeps:
 	@scripts/setup-deploy.sh
 
 # Every test: the slow trainings too (CROSSROADS_SLOW_TESTS=1), and those
-# that need Python, Docker or SUMO (ignored by plain `cargo test`), which
-# fail here when their tool is missing (CROSSROADS_REQUIRE_*=1).
+# that need Python, Docker, SUMO or (as root) a tmpfs mount (ignored by
+# plain `cargo test`), which fail here when their tool is missing
+# (CROSSROADS_REQUIRE_*=1).
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
-	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 $(CARGO) test --workspace --all-targets --no-fail-fast -- --include-ignored
+	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 \
+	CROSSROADS_REQUIRE_MOUNT=$$([ "$$(id -u)" = 0 ] && echo 1) \
+	$(CARGO) test --workspace --all-targets --no-fail-fast -- --include-ignored
 	$(CARGO) test --workspace --doc
 
 lint: setup
@@ -46,6 +49,12 @@ lint: setup
 
 fmt:
 	$(CARGO) fmt --all
+
+# The fault-injection suite, long: every kill -9 repeated many times (the
+# quick version runs in `make test`).
+faults: setup
+	CROSSROADS_LONG_FAULTS=1 CROSSROADS_REQUIRE_MOUNT=$$([ "$$(id -u)" = 0 ] && echo 1) \
+	$(CARGO) test -p crossroads --test it faults -- --include-ignored --nocapture --test-threads 1
 
 # Learner updates/s against the same network in PyTorch (installs torch).
 bench-learner: build

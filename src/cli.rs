@@ -784,6 +784,44 @@ pub enum BenchTarget {
         #[arg(long)]
         json: bool,
     },
+    /// Load: one replay server under many actors' streams, and one learner
+    /// under many weight subscribers with one stalled.
+    ///
+    /// Starts a replay server in this process and pushes synthetic TTG
+    /// batches at it from --streams gRPC streams (each its own connection)
+    /// and --shm iceoryx2 publishers for --seconds, with the write-ahead
+    /// log off and on; prints transitions/s stored, ack latency p50/p99,
+    /// the table's bytes and the resident memory (peak against the table's
+    /// bytes). Then a learner (the run's network) trains on a filled replay
+    /// while --subscribers subscribe to its weights, one of them never
+    /// reading: prints the versions published and received by the slowest
+    /// live subscriber, and the memory.
+    Load {
+        /// Concurrent gRPC insert streams.
+        #[arg(long, default_value_t = 64)]
+        streams: usize,
+        /// Concurrent shared-memory publishers (at most transport.shm_max_publishers).
+        #[arg(long, default_value_t = 8)]
+        shm: usize,
+        /// Seconds per measurement.
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+        /// Table capacity, items (the run exceeds it, so eviction is timed too).
+        #[arg(long, default_value_t = 200_000)]
+        capacity: u64,
+        /// Transitions per batch.
+        #[arg(long, default_value_t = 32)]
+        batch: usize,
+        /// Write-ahead log: off, on, or both (one run each).
+        #[arg(long, default_value = "both", value_parser = ["off", "on", "both"])]
+        wal: String,
+        /// Weight subscribers on the learner (0 skips that part).
+        #[arg(long, default_value_t = 64)]
+        subscribers: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Replay table: bytes per transition, inserts/s, samples/s.
     ///
     /// Fills a table with synthetic TTG episodes (3-8 cars per grid), then

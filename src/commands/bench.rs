@@ -10,6 +10,7 @@ use crate::cli::{BenchArgs, BenchTarget};
 
 mod actor;
 mod learner;
+mod load;
 
 /// Runs the chosen measurement and prints its figures.
 pub fn run(config: &Config, args: &BenchArgs) -> anyhow::Result<ExitCode> {
@@ -51,6 +52,32 @@ pub fn run(config: &Config, args: &BenchArgs) -> anyhow::Result<ExitCode> {
                 rounds: *rounds,
                 seconds: *seconds,
                 warmup: *warmup,
+                json: *json,
+            },
+        ),
+        BenchTarget::Load {
+            streams,
+            shm,
+            seconds,
+            capacity,
+            batch,
+            wal,
+            subscribers,
+            json,
+        } => load::run(
+            config,
+            &load::Options {
+                streams: *streams,
+                shm: *shm,
+                seconds: *seconds,
+                capacity: *capacity,
+                batch: *batch,
+                wal: match wal.as_str() {
+                    "on" => vec![true],
+                    "off" => vec![false],
+                    _ => vec![false, true],
+                },
+                subscribers: *subscribers,
                 json: *json,
             },
         ),

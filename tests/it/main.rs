@@ -4,8 +4,10 @@
 mod cli;
 mod deploy;
 mod experiments;
+mod faults;
 mod graph;
 mod learner;
+mod procs;
 mod replay;
 mod reproduce;
 mod setup_libtorch;

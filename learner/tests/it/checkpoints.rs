@@ -243,5 +243,8 @@ fn the_version_lease_round_trips_and_a_damaged_one_is_refused_naming_it() {
     assert_eq!(names, ["versions.lease"], "no temporary file left");
     std::fs::write(dir.path().join("versions.lease"), "40\u{0}").unwrap();
     let err = store.version_lease().unwrap_err().to_string();
-    assert!(err.contains("versions.lease") && err.contains("not a version"), "{err}");
+    assert!(
+        err.contains("versions.lease") && err.contains("not a version"),
+        "{err}"
+    );
 }

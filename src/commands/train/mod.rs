@@ -30,7 +30,7 @@ mod evaluate;
 mod prepare;
 mod procs;
 mod record;
-mod session;
+pub(crate) mod session;
 mod watch;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,499 @@
+//! Faults as an operator meets them, on real processes: kill -9 of the
+//! replay server and of the learner at random moments, and a replay disk
+//! that fills up. Each test counts exactly what was lost (by batch tag or
+//! version) and how long recovery took, and prints it.
+//!
+//! The quick version runs in `make test`; `CROSSROADS_LONG_FAULTS=1` (as
+//! `make faults` sets) repeats every kill many more times.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use crossroads_config::TransportConfig;
+use crossroads_transport::grpc::ReplayClient;
+use crossroads_transport::learner_client::LearnerClient;
+use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use rand::{RngExt, SeedableRng};
+use std::sync::Mutex;
+
+use crate::procs::Proc;
+
+/// Kill rounds: `quick` in `make test`, `long` with
+/// `CROSSROADS_LONG_FAULTS=1`.
+fn rounds(quick: usize, long: usize) -> usize {
+    if std::env::var("CROSSROADS_LONG_FAULTS").is_ok_and(|v| v == "1") {
+        long
+    } else {
+        quick
+    }
+}
+
+/// The seed of this run's random moments, printed so a failure replays.
+fn rng(test: &str) -> rand::rngs::StdRng {
+    let seed = std::env::var("CROSSROADS_FAULT_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(1, |d| d.as_nanos() as u64)
+        });
+    eprintln!("{test}: CROSSROADS_FAULT_SEED={seed}");
+    rand::rngs::StdRng::seed_from_u64(seed)
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+/// Ten transitions whose rewards all carry `tag`, so the stored items
+/// tell which batches came through.
+fn tagged(tag: u32) -> TransitionBatch {
+    let spec = ObservationSpec::new("toy", [4, 4, 2]);
+    let mut b = TransitionBatch::new(spec, 5, ObservationEncoding::SparseF32);
+    let mut grid = vec![0.0; 32];
+    let mut current = b.push_observation(&grid);
+    for i in 0..10 {
+        grid[i * 3 % 32] = tag as f32;
+        let next = b.push_observation(&grid);
+        b.push(Transition {
+            observation: current,
+            action: (i % 5) as u32,
+            reward: tag as f32,
+            discount: 0.99,
+            priority: 1.0,
+            next_observation: next,
+        });
+        current = next;
+    }
+    b
+}
+
+fn start_replay(dir: &Path) -> (Proc, String, Duration) {
+    let started = Instant::now();
+    let p = Proc::spawn(&[
+        "replay".as_ref(),
+        "--listen".as_ref(),
+        "127.0.0.1:0".as_ref(),
+        "--no-shm".as_ref(),
+        "--capacity".as_ref(),
+        "1000000".as_ref(),
+        "--table".as_ref(),
+        "faults".as_ref(),
+        "--snapshot-dir".as_ref(),
+        dir.as_os_str(),
+    ]);
+    let addr = p.addr("replay server listening");
+    (p, addr, started.elapsed())
+}
+
+fn replay_client(addr: &str) -> ReplayClient {
+    let transport = TransportConfig {
+        replay_endpoint: format!("http://{addr}"),
+        request_timeout_ms: 5_000,
+        ..TransportConfig::default()
+    };
+    ReplayClient::new(&transport, "faults").expect("client")
+}
+
+/// Transitions held by the server, by tag: it writes a snapshot on
+/// request, which is read back here.
+fn stored(rt: &tokio::runtime::Runtime, addr: &str) -> BTreeMap<u32, usize> {
+    let written = rt
+        .block_on(replay_client(addr).snapshot())
+        .expect("snapshot on request");
+    let tables = crossroads_replay::snapshot::read(Path::new(&written.path)).expect("readable");
+    let mut count = BTreeMap::new();
+    for (_, image) in tables {
+        for r in &image.items.rewards {
+            *count.entry(*r as u32).or_default() += 1;
+        }
+    }
+    count
+}
+
+fn median(mut v: Vec<Duration>) -> Duration {
+    v.sort();
+    v.get(v.len() / 2).copied().unwrap_or_default()
+}
+
+#[test]
+fn the_replay_killed_at_random_moments_loses_no_acknowledged_transition() {
+    let rounds = rounds(3, 25);
+    let mut rng = rng("replay kill -9");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rt = runtime();
+    // Clients connect lazily, on this runtime.
+    let _enter = rt.enter();
+    let next_tag = Arc::new(AtomicU32::new(1));
+    let mut acked_all = BTreeSet::new();
+    let (mut recoveries, mut unacked_stored) = (Vec::new(), 0usize);
+    for round in 0..=rounds {
+        let (replay, addr, recovery) = start_replay(dir.path());
+        if round > 0 {
+            recoveries.push(recovery);
+        }
+        // Everything acknowledged before every kill so far is there, once.
+        let held = stored(&rt, &addr);
+        let lost: Vec<u32> = acked_all
+            .iter()
+            .filter(|t| held.get(t) != Some(&10))
+            .copied()
+            .collect();
+        assert!(
+            lost.is_empty(),
+            "round {round}: {} acknowledged batches lost or partial: {lost:?}",
+            lost.len()
+        );
+        assert!(
+            held.values().all(|n| *n == 10),
+            "a batch stored twice or in part"
+        );
+        unacked_stored = held.keys().filter(|t| !acked_all.contains(t)).count();
+        if round == rounds {
+            replay.terminate();
+            break;
+        }
+        // Four actors insert until the kill, at a random moment.
+        let acked = Arc::new(Mutex::new(Vec::new()));
+        let actors: Vec<_> = (0..4)
+            .map(|_| {
+                let (client, acked, next_tag) =
+                    (replay_client(&addr), acked.clone(), next_tag.clone());
+                rt.spawn(async move {
+                    loop {
+                        let tag = next_tag.fetch_add(1, Ordering::Relaxed);
+                        match client.insert(tagged(tag)).await {
+                            Ok(ack) if ack.inserted == 10 => acked.lock().expect("lock").push(tag),
+                            Ok(ack) => panic!("partial insert {ack:?}"),
+                            Err(_) => return,
+                        }
+                    }
+                })
+            })
+            .collect();
+        std::thread::sleep(Duration::from_millis(rng.random_range(150..900)));
+        replay.kill9();
+        for a in actors {
+            rt.block_on(a).expect("actor task");
+        }
+        let acked = std::mem::take(&mut *acked.lock().expect("lock"));
+        assert!(
+            !acked.is_empty(),
+            "round {round}: nothing acknowledged before the kill"
+        );
+        acked_all.extend(acked);
+    }
+    eprintln!(
+        "faults: replay kill -9 x{rounds}: {} batches ({} transitions) acknowledged, 0 lost; \
+         {unacked_stored} stored without their acknowledgement (in flight at a kill); \
+         restart to serving: median {:?}, max {:?}",
+        acked_all.len(),
+        acked_all.len() * 10,
+        median(recoveries.clone()),
+        recoveries.iter().max().copied().unwrap_or_default(),
+    );
+}
+
+fn learner_client(addr: &str) -> LearnerClient {
+    LearnerClient::new(&format!("http://{addr}"), None, Duration::from_secs(10)).expect("client")
+}
+
+#[test]
+fn the_learner_killed_at_random_moments_restarts_from_a_whole_checkpoint_above_every_version() {
+    let rounds = rounds(3, 20);
+    let mut rng = rng("learner kill -9");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let rt = runtime();
+    // Clients connect lazily, on this runtime.
+    let _enter = rt.enter();
+    let replay = Proc::spawn(&[
+        "replay",
+        "--listen",
+        "127.0.0.1:0",
+        "--no-shm",
+        "--capacity",
+        "5000",
+    ]);
+    let replay_addr = replay.addr("replay server listening");
+    let config = {
+        let mut c = crossroads_config::Config::default();
+        c.sim.action_set = "sequential".to_owned();
+        c.learner.hidden = vec![32];
+        crossroads_actor::resolve_observation(&mut c.sim).expect("a built-in pairing");
+        c
+    };
+    let spec = crossroads_learner::TrainerConfig::from_config(&config.sim, &config.learner)
+        .expect("valid")
+        .spec;
+    rt.block_on(async {
+        let client = ReplayClient::new(
+            &TransportConfig {
+                replay_endpoint: format!("http://{replay_addr}"),
+                ..TransportConfig::default()
+            },
+            "transitions",
+        )?;
+        crossroads_learner::bench::fill_replay(&client, &spec, 1_000).await
+    })
+    .expect("fill the replay");
+    let ckpts = dir.path().join("ckpts");
+    let args: Vec<String> = [
+        "--set",
+        "sim.action_set=sequential",
+        "--set",
+        "learner.hidden=[32]",
+        "--set",
+        "learner.batch_size=16",
+        "--set",
+        "learner.publish_every=2",
+        // A checkpoint every few updates: many kills land in a write.
+        "--set",
+        "learner.checkpoint_every=3",
+        "learner",
+        "--listen",
+        "127.0.0.1:0",
+        "--no-shm",
+        "--replay",
+    ]
+    .into_iter()
+    .map(str::to_owned)
+    .chain([
+        format!("http://{replay_addr}"),
+        "--checkpoint-dir".to_owned(),
+        ckpts.display().to_string(),
+    ])
+    .collect();
+    let (mut highest, mut recoveries) = (0u64, Vec::new());
+    for round in 0..=rounds {
+        let started = Instant::now();
+        let learner = Proc::spawn(&args);
+        let addr = learner.addr("learner listening");
+        let c = learner_client(&addr);
+        let status = rt.block_on(c.status()).expect("status");
+        if round > 0 {
+            recoveries.push(started.elapsed());
+            assert!(
+                status.weights_version > highest,
+                "round {round}: restarted at version {} after {highest} was published",
+                status.weights_version
+            );
+            assert!(
+                status.update_step > 0,
+                "resumed, not started over: {status:?}"
+            );
+        }
+        if round == rounds {
+            learner.terminate();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(rng.random_range(300..1500)));
+        // The highest version published before the kill; it may publish
+        // more between this call and the kill, which the lease covers too.
+        highest = rt.block_on(c.status()).expect("status").weights_version;
+        let log = learner.drain();
+        assert!(
+            !log.iter().any(|l| l.contains("cannot resume")),
+            "round {round}: a partial checkpoint was tried: {log:?}"
+        );
+        learner.kill9();
+    }
+    let leftovers: Vec<String> = std::fs::read_dir(&ckpts)
+        .expect("list")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(
+        leftovers.is_empty(),
+        "interrupted writes cleaned up: {leftovers:?}"
+    );
+    replay.terminate();
+    eprintln!(
+        "faults: learner kill -9 x{rounds}: every restart resumed a whole checkpoint, versions \
+         only increased (last seen {highest}); restart to serving: median {:?}, max {:?}",
+        median(recoveries.clone()),
+        recoveries.iter().max().copied().unwrap_or_default(),
+    );
+}
+
+/// A tmpfs of `bytes` mounted on a new temporary folder, unmounted on
+/// drop; `None` (the test says why it skips) where mounting is not
+/// allowed, unless CROSSROADS_REQUIRE_MOUNT=1 (as `make test` sets when it
+/// runs as root).
+struct SmallDisk {
+    dir: tempfile::TempDir,
+}
+
+impl SmallDisk {
+    fn mount(bytes: u64) -> Option<Self> {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let out = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={bytes}"), "tmpfs"])
+            .arg(dir.path())
+            .output();
+        match out {
+            Ok(o) if o.status.success() => Some(Self { dir }),
+            other => {
+                let why = match other {
+                    Ok(o) => String::from_utf8_lossy(&o.stderr).trim().to_owned(),
+                    Err(e) => e.to_string(),
+                };
+                assert!(
+                    !std::env::var("CROSSROADS_REQUIRE_MOUNT").is_ok_and(|v| v == "1"),
+                    "cannot mount a tmpfs ({why}) but CROSSROADS_REQUIRE_MOUNT=1"
+                );
+                eprintln!("skipped: cannot mount a tmpfs here ({why}); run as root");
+                None
+            }
+        }
+    }
+
+    fn path(&self) -> &Path {
+        self.dir.path()
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg(self.dir.path())
+            .status();
+    }
+}
+
+/// The value of metric `name` on the line that also contains `label`.
+fn metric(registry: &prometheus::Registry, name: &str, label: &str) -> f64 {
+    let text = crossroads_common::metrics::render(registry);
+    text.lines()
+        .find(|l| l.starts_with(name) && l.contains(label))
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no {name} with {label} in\n{text}"))
+}
+
+#[test]
+#[ignore = "needs root to mount a tmpfs (make test runs it)"]
+fn a_full_replay_disk_fails_writes_clearly_corrupts_nothing_and_keeps_serving() {
+    let Some(disk) = SmallDisk::mount(1 << 20) else {
+        return;
+    };
+    let rt = runtime();
+    // Clients connect lazily, on this runtime.
+    let _enter = rt.enter();
+    let mut config = crossroads_config::Config::default();
+    config.replay.listen = "127.0.0.1:0".parse().expect("addr");
+    config.replay.table = "faults".to_owned();
+    config.replay.capacity = 100_000;
+    config.replay.min_size_to_sample = 1;
+    config.replay.shm_ingest = false;
+    config.replay.snapshot_interval_secs = 0;
+    config.replay.snapshot_dir = Some(disk.path().join("replay"));
+    let registry = crossroads_common::metrics::registry("replay").expect("registry");
+    let shutdown = crossroads_common::Shutdown::new();
+    let server = rt
+        .block_on(crossroads_replay::start(
+            &config,
+            Some(&registry),
+            shutdown.clone(),
+        ))
+        .expect("start");
+    let addr = server.local_addr().to_string();
+    let client = replay_client(&addr);
+    // Leave the log a little room, then fill it.
+    let filler = disk.path().join("filler");
+    std::fs::write(&filler, vec![0u8; (1 << 20) - (64 << 10)]).expect("filler");
+    let (mut acked, mut tag) = (Vec::new(), 1);
+    let refusal = loop {
+        match rt.block_on(client.insert(tagged(tag))) {
+            Ok(_) => acked.push(tag),
+            Err(e) => break e,
+        }
+        tag += 1;
+        assert!(tag < 10_000, "the disk never filled");
+    };
+    assert_eq!(refusal.code(), Some(tonic::Code::Unavailable), "{refusal}");
+    let text = refusal.to_string();
+    assert!(
+        text.contains("No space left on device") && text.contains("write-ahead log"),
+        "names the problem: {text}"
+    );
+    assert!(metric(&registry, "crossroads_replay_wal_errors_total", "") >= 1.0);
+    assert!(
+        metric(
+            &registry,
+            "crossroads_replay_rejections_total",
+            "unavailable"
+        ) >= 1.0
+    );
+    // Within the second after, an insert is refused before it touches the
+    // table.
+    let size = rt.block_on(client.info()).expect("info").size;
+    let again = rt
+        .block_on(client.insert(tagged(tag + 1)))
+        .expect_err("refused");
+    assert!(again.to_string().contains("nothing stored"), "{again}");
+    assert_eq!(rt.block_on(client.info()).expect("info").size, size);
+    // A snapshot fails with a clear error and a metric; the server still
+    // serves samples.
+    let failed = rt.block_on(client.snapshot()).expect_err("no room");
+    assert!(
+        failed.to_string().contains("No space left on device"),
+        "{failed}"
+    );
+    assert!(metric(&registry, "crossroads_replay_snapshots_total", "\"error\"") >= 1.0);
+    let sample = rt
+        .block_on(client.sample(8, 0.5, Duration::from_secs(1)))
+        .expect("still serving");
+    assert_eq!(sample.keys.len(), 8);
+    // What was written is whole: every segment reads to its end.
+    let wal_dir = disk.path().join("replay").join("wal");
+    for entry in std::fs::read_dir(&wal_dir).expect("wal folder") {
+        let bytes = std::fs::read(entry.expect("entry").path()).expect("read");
+        let decoded = crossroads_replay::wal::decode_segment(&bytes).expect("a whole header");
+        assert_eq!(decoded.torn, None, "cut back to its last whole record");
+    }
+    // Room again: inserts resume (after the second of refusal), and a
+    // crash now loses nothing acknowledged.
+    std::fs::remove_file(&filler).expect("free the disk");
+    std::thread::sleep(Duration::from_millis(1100));
+    for t in 20_000..20_005 {
+        rt.block_on(client.insert(tagged(t)))
+            .expect("inserts again");
+        acked.push(t);
+    }
+    let crashed = tempfile::tempdir().expect("temp dir");
+    copy_dir(&disk.path().join("replay"), crashed.path());
+    shutdown.trigger();
+    rt.block_on(server.join()).expect("clean stop");
+    let (replay, addr, _) = start_replay(crashed.path());
+    let held = stored(&rt, &addr);
+    let lost: Vec<_> = acked.iter().filter(|t| held.get(t) != Some(&10)).collect();
+    assert!(lost.is_empty(), "acknowledged and lost: {lost:?}");
+    replay.terminate();
+    eprintln!(
+        "faults: replay disk full: {} batches acknowledged before and after, 0 lost; \
+         inserts refused with UNAVAILABLE naming the disk while full; samples served throughout",
+        acked.len()
+    );
+}
+
+/// What a kill -9 leaves: the folder's files as they are on disk now.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("mkdir");
+    for entry in std::fs::read_dir(from).expect("list") {
+        let entry = entry.expect("entry");
+        let target = to.join(entry.file_name());
+        if entry.file_type().expect("type").is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).expect("copy");
+        }
+    }
+}
