@@ -21,14 +21,14 @@ use std::sync::Mutex;
 
 use crate::procs::Proc;
 
-/// Kill rounds: `quick` in `make test`, `long` with
-/// `CROSSROADS_LONG_FAULTS=1`.
-fn rounds(quick: usize, long: usize) -> usize {
-    if std::env::var("CROSSROADS_LONG_FAULTS").is_ok_and(|v| v == "1") {
-        long
-    } else {
-        quick
-    }
+/// Whether this is the long suite: `CROSSROADS_LONG_FAULTS=1`.
+fn long() -> bool {
+    std::env::var("CROSSROADS_LONG_FAULTS").is_ok_and(|v| v == "1")
+}
+
+/// Kill rounds: `quick` in `make test`, `long` in the long suite.
+fn rounds(quick: usize, long_rounds: usize) -> usize {
+    if long() { long_rounds } else { quick }
 }
 
 /// The seed of this run's random moments, printed so a failure replays.
@@ -496,4 +496,317 @@ fn copy_dir(from: &Path, to: &Path) {
             std::fs::copy(entry.path(), target).expect("copy");
         }
     }
+}
+
+/// A network namespace with a veth pair to this one: the host side is
+/// `<prefix>.1`, the namespace side `<prefix>.2`. Deleted (with its link)
+/// on drop.
+struct Netns {
+    name: String,
+    prefix: String,
+}
+
+fn sh(program: &str, args: &[&str]) -> Result<(), String> {
+    let out = std::process::Command::new(program)
+        .args(args)
+        .output()
+        .map_err(|e| format!("{program}: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{program} {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+impl Netns {
+    /// `None` (the test says why it skips) where namespaces cannot be made,
+    /// unless CROSSROADS_REQUIRE_MOUNT=1 (as `make test` sets as root).
+    fn create() -> Option<Self> {
+        let id = std::process::id();
+        let ns = Self {
+            name: format!("crf{id}"),
+            prefix: format!("10.231.{}", id % 250 + 1),
+        };
+        let (host, inside) = (format!("crfh{id}"), format!("crfa{id}"));
+        let made = (|| {
+            sh("ip", &["netns", "add", &ns.name])?;
+            sh(
+                "ip",
+                &[
+                    "link", "add", &host, "type", "veth", "peer", "name", &inside,
+                ],
+            )?;
+            sh("ip", &["link", "set", &inside, "netns", &ns.name])?;
+            sh(
+                "ip",
+                &["addr", "add", &format!("{}.1/24", ns.prefix), "dev", &host],
+            )?;
+            sh("ip", &["link", "set", &host, "up"])?;
+            let exec = |args: &[&str]| {
+                let mut all = vec!["netns", "exec", &ns.name];
+                all.extend_from_slice(args);
+                sh("ip", &all)
+            };
+            exec(&[
+                "ip",
+                "addr",
+                "add",
+                &format!("{}.2/24", ns.prefix),
+                "dev",
+                &inside,
+            ])?;
+            exec(&["ip", "link", "set", &inside, "up"])?;
+            exec(&["ip", "link", "set", "lo", "up"])
+        })();
+        match made {
+            Ok(()) => Some(ns),
+            Err(why) => {
+                assert!(
+                    !std::env::var("CROSSROADS_REQUIRE_MOUNT").is_ok_and(|v| v == "1"),
+                    "cannot make a network namespace ({why}) but CROSSROADS_REQUIRE_MOUNT=1"
+                );
+                eprintln!("skipped: cannot make a network namespace here ({why}); run as root");
+                None
+            }
+        }
+    }
+
+    /// Drops (or, `cut = false`, lets through again) TCP from the namespace
+    /// to the host's `port`, both ways.
+    fn partition(&self, port: u16, cut: bool) {
+        let op = if cut { "-A" } else { "-D" };
+        let host = format!("{}.1", self.prefix);
+        let port = port.to_string();
+        for rule in [
+            ["OUTPUT", "-d", host.as_str(), "--dport", port.as_str()],
+            ["INPUT", "-s", host.as_str(), "--sport", port.as_str()],
+        ] {
+            sh(
+                "ip",
+                &[
+                    "netns", "exec", &self.name, "iptables", op, rule[0], rule[1], rule[2], "-p",
+                    "tcp", rule[3], rule[4], "-j", "DROP",
+                ],
+            )
+            .expect("iptables");
+        }
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        let _ = sh("ip", &["netns", "del", &self.name]);
+    }
+}
+
+/// The value of `name` (summed over labels) on the metrics page at `addr`.
+fn scrape(addr: &str, name: &str) -> Option<f64> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).ok()?;
+    s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+    write!(
+        s,
+        "GET /metrics HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .ok()?;
+    let mut text = String::new();
+    s.read_to_string(&mut text).ok()?;
+    let values: Vec<f64> = text
+        .lines()
+        .filter(|l| l.starts_with(name) && l[name.len()..].starts_with([' ', '{']))
+        .filter_map(|l| l.rsplit(' ').next()?.parse().ok())
+        .collect();
+    (!values.is_empty()).then(|| values.iter().sum())
+}
+
+/// Polls `probe` every 200 ms until `done` holds of its value; returns how
+/// long that took, or fails naming `what` after `limit`.
+fn wait_until<T: std::fmt::Debug>(
+    what: &str,
+    limit: Duration,
+    mut probe: impl FnMut() -> T,
+    done: impl Fn(&T) -> bool,
+) -> Duration {
+    let start = Instant::now();
+    loop {
+        let v = probe();
+        if done(&v) {
+            return start.elapsed();
+        }
+        assert!(
+            start.elapsed() < limit,
+            "{what}: still {v:?} after {limit:?}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+#[test]
+#[ignore = "needs root for network namespaces (make test runs it)"]
+fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts() {
+    let Some(ns) = Netns::create() else {
+        return;
+    };
+    let cut_for = Duration::from_secs(if long() { 40 } else { 12 });
+    let rt = runtime();
+    let _enter = rt.enter();
+    let host = format!("{}.1", ns.prefix);
+    let with_common = |extra: &[&str]| -> Vec<String> {
+        [
+            "--set",
+            "sim.action_set=sequential",
+            "--set",
+            "learner.hidden=[32]",
+            "--set",
+            "replay.table=faults",
+        ]
+        .iter()
+        .chain(extra)
+        .map(|s| (*s).to_owned())
+        .collect()
+    };
+    let port_of = |addr: &str| -> u16 {
+        addr.rsplit(':')
+            .next()
+            .and_then(|p| p.parse().ok())
+            .expect("a port")
+    };
+    let listen = format!("{host}:0");
+    let replay = Proc::spawn(&with_common(&[
+        "--set",
+        "replay.min_size_to_sample=200",
+        "replay",
+        "--listen",
+        &listen,
+        "--no-shm",
+        "--capacity",
+        "50000",
+        "--table",
+        "faults",
+    ]));
+    let replay_addr = replay.addr("replay server listening");
+    let replay_url = format!("http://{replay_addr}");
+    let learner = Proc::spawn(&with_common(&[
+        "--set",
+        "learner.batch_size=16",
+        "--set",
+        "learner.publish_every=5",
+        "learner",
+        "--listen",
+        &listen,
+        "--no-shm",
+        "--replay",
+        &replay_url,
+    ]));
+    let learner_addr = learner.addr("learner listening");
+    let learner_url = format!("http://{learner_addr}");
+    let metrics = format!("{}.2:9464", ns.prefix);
+    let metrics_addr = format!("telemetry.metrics_addr={metrics}");
+    let mut actor = Proc::spawn_in(
+        &ns.name,
+        &with_common(&[
+            "--set",
+            "telemetry.metrics=true",
+            "--set",
+            &metrics_addr,
+            "--set",
+            "transport.request_timeout_ms=3000",
+            "--set",
+            "transport.connect_timeout_ms=2000",
+            "--set",
+            "transport.max_backoff_ms=2000",
+            "actor",
+            "--transport",
+            "grpc",
+            "--weights",
+            "grpc",
+            "--index",
+            "0",
+            "--count",
+            "1",
+            "--envs",
+            "4",
+            "--replay",
+            &replay_url,
+            "--learner",
+            &learner_url,
+        ]),
+    );
+    let (replay_port, learner_port) = (port_of(&replay_addr), port_of(&learner_addr));
+    let pushed = || scrape(&metrics, "crossroads_actor_transitions_pushed_total").unwrap_or(0.0);
+    let actor_version = || scrape(&metrics, "crossroads_actor_weights_version").unwrap_or(0.0);
+    let learner_rpc = learner_client(&learner_addr);
+    let learner_version = || {
+        rt.block_on(learner_rpc.status())
+            .map_or(0, |s| s.weights_version)
+    };
+    let stored = || {
+        rt.block_on(replay_client(&replay_addr).info())
+            .expect("the replay answers the host")
+            .inserts_total
+    };
+    // Training runs: the actor pushes, the learner publishes, the actor
+    // follows.
+    wait_until("the actor pushing", Duration::from_secs(90), pushed, |p| {
+        *p > 500.0
+    });
+    wait_until(
+        "the actor on learned weights",
+        Duration::from_secs(90),
+        actor_version,
+        |v| *v >= 2.0,
+    );
+
+    // Actor <-> replay cut: nothing reaches the table; the actor lives on.
+    ns.partition(replay_port, true);
+    std::thread::sleep(Duration::from_secs(3));
+    let (stored_at_cut, pushed_at_cut) = (stored(), pushed());
+    std::thread::sleep(cut_for);
+    assert_eq!(stored(), stored_at_cut, "nothing crossed the cut");
+    assert!(actor.is_running(), "the actor survived the cut");
+    assert_eq!(pushed(), pushed_at_cut);
+    ns.partition(replay_port, false);
+    let replay_recovery = wait_until(
+        "inserts after the replay cut healed",
+        Duration::from_secs(60),
+        stored,
+        |s| *s > stored_at_cut,
+    );
+    let dropped = scrape(&metrics, "crossroads_actor_transitions_dropped_total").unwrap_or(0.0);
+
+    // Actor <-> learner cut: the learner publishes on, the actor keeps
+    // acting on the weights it has and catches up after.
+    ns.partition(learner_port, true);
+    std::thread::sleep(Duration::from_secs(3));
+    let held = actor_version();
+    let stored_during = stored();
+    std::thread::sleep(cut_for);
+    assert_eq!(actor_version(), held, "no weights crossed the cut");
+    assert!(learner_version() as f64 > held, "the learner published on");
+    assert!(
+        stored() > stored_during,
+        "the actor kept pushing to the replay"
+    );
+    let published = learner_version() as f64;
+    ns.partition(learner_port, false);
+    let learner_recovery = wait_until(
+        "weights after the learner cut healed",
+        Duration::from_secs(60),
+        actor_version,
+        |v| *v >= published,
+    );
+    assert!(actor.is_running(), "the actor survived both cuts");
+    actor.terminate();
+    learner.terminate();
+    replay.terminate();
+    eprintln!(
+        "faults: an actor cut from the replay for {cut_for:?} then from the learner for {cut_for:?}, \
+         no restart: inserts resumed {replay_recovery:?} after the first heal, weights caught up \
+         {learner_recovery:?} after the second; the actor dropped {dropped} transitions it could \
+         not deliver during the cut (counted by crossroads_actor_transitions_dropped_total)"
+    );
 }

@@ -18,7 +18,20 @@ impl Proc {
     /// Starts `crossroads args` without a config from the environment and
     /// without metrics.
     pub fn spawn<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        Self::spawn_from(Command::new(env!("CARGO_BIN_EXE_crossroads")), args)
+    }
+
+    /// [`spawn`](Self::spawn) inside network namespace `netns`.
+    pub fn spawn_in<S: AsRef<std::ffi::OsStr>>(netns: &str, args: &[S]) -> Self {
+        let mut command = Command::new("ip");
+        command
+            .args(["netns", "exec", netns])
+            .arg(env!("CARGO_BIN_EXE_crossroads"));
+        Self::spawn_from(command, args)
+    }
+
+    fn spawn_from<S: AsRef<std::ffi::OsStr>>(mut command: Command, args: &[S]) -> Self {
+        let mut child = command
             .args(["--set", "telemetry.metrics=false"])
             .args(args)
             .env_remove("CROSSROADS_CONFIG")
@@ -61,6 +74,11 @@ impl Proc {
             .find_map(|w| w.strip_prefix("addr="))
             .unwrap_or_else(|| panic!("no addr= in {line:?}"))
             .to_owned()
+    }
+
+    /// Whether it is still running.
+    pub fn is_running(&mut self) -> bool {
+        self.child.try_wait().expect("wait").is_none()
     }
 
     /// Every log line so far.
