@@ -8,6 +8,7 @@ mod graph;
 mod learner;
 mod replay;
 mod reproduce;
+mod security;
 mod setup_libtorch;
 mod sim_commands;
 mod sumo;
