@@ -41,6 +41,11 @@ use crate::training::{Learner, LoopInputs, Shared, StatusView};
 /// Priority updates queued for the sender before new ones are dropped.
 const PRIORITY_QUEUE: usize = 64;
 
+/// Longest the gRPC server may take to drain after shutdown before its
+/// connections are dropped (a weights subscriber that stopped reading
+/// would otherwise hold it open for good).
+const DRAIN: Duration = Duration::from_secs(10);
+
 /// A started learner.
 #[derive(Debug)]
 pub struct RunningLearner {
@@ -143,8 +148,15 @@ pub async fn start(
     );
 
     let (prefetch_task, priority_task) = replay.tasks;
+    let drained = stop.clone();
     let task = tokio::spawn(async move {
-        let served = served.await.map_err(|e| LearnerError::Serve(e.to_string()));
+        let served = tokio::select! {
+            r = served => r.map_err(|e| LearnerError::Serve(e.to_string())),
+            _ = async { drained.wait().await; tokio::time::sleep(DRAIN).await } => {
+                tracing::warn!("gRPC connections did not drain in {DRAIN:?}; dropping them");
+                Ok(())
+            }
+        };
         let trained = trained.await.unwrap_or(Err(LearnerError::Stopped));
         let _ = tokio::join!(prefetch_task, priority_task, age_task);
         trained.and(served)

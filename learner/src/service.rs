@@ -109,7 +109,13 @@ impl pb::learner_server::Learner for LearnerService {
             loop {
                 if let Some(w) = watch.newer_than(have) {
                     have = w.version;
-                    if tx.send(Ok(weights_to_wire(&w))).await.is_err() {
+                    // A subscriber that stops reading must not hold the
+                    // server's graceful shutdown open.
+                    let sent = tokio::select! {
+                        sent = tx.send(Ok(weights_to_wire(&w))) => sent.is_ok(),
+                        _ = shutdown.wait() => false,
+                    };
+                    if !sent {
                         break;
                     }
                 }
