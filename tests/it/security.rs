@@ -354,6 +354,18 @@ fn plain_text_and_untrusted_clients_fail_against_a_tls_server() {
                 "{text}"
             );
         }
+        // A server that is simply not there gets no TLS hint.
+        let closed = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        let nobody = closed.local_addr().expect("addr");
+        drop(closed);
+        let err = replay_client(&config().transport, "http", nobody)
+            .info()
+            .await
+            .expect_err("nobody listens");
+        assert!(
+            !err.to_string().contains("if the server speaks TLS"),
+            "{err}"
+        );
 
         let mut stranger = c.transport.clone();
         stranger.tls.ca_file = Some(pki.path("stranger-ca.pem"));

@@ -105,11 +105,22 @@ pub(crate) fn status_message(s: &tonic::Status) -> String {
     }
 }
 
-/// `message`, with a hint when a plain-text client's connection failed:
-/// a server that speaks TLS answers plain HTTP/2 by closing the
-/// connection, which says nothing about TLS by itself.
+/// `message`, with a hint when a plain-text client's connection broke the
+/// way a TLS server breaks it: it answers plain HTTP/2 with an alert (read
+/// as an oversized frame) and closes, which says nothing about TLS by
+/// itself. A refused connection (a server that is down) gets no hint.
 pub(crate) fn hint_plain_text(status: &tonic::Status, endpoint: &str, message: String) -> String {
-    if endpoint.starts_with("http://") && std::error::Error::source(status).is_some() {
+    const SIGNS: [&str; 4] = [
+        "frame with invalid size",
+        "broken pipe",
+        "connection reset",
+        "connection closed",
+    ];
+    let lower = message.to_ascii_lowercase();
+    if endpoint.starts_with("http://")
+        && std::error::Error::source(status).is_some()
+        && SIGNS.iter().any(|s| lower.contains(s))
+    {
         format!(
             "{message} (if the server speaks TLS, reach it at https:// with \
              transport.tls.ca_file set)"
