@@ -420,15 +420,11 @@ pub struct CheckpointsArgs {
         value_name = "URL"
     )]
     pub learner: String,
-    /// Bearer token for save, restore and delete (the learner's
-    /// learner.api_token).
-    #[arg(
-        long,
-        global = true,
-        env = "CROSSROADS_LEARNER_TOKEN",
-        hide_env_values = true,
-        value_name = "TOKEN"
-    )]
+    /// Bearer token for save, restore and delete, instead of the
+    /// configured one (transport.auth.token_file, or the CROSSROADS_TOKEN
+    /// variable, which keeps it out of the process list). For an https://
+    /// URL, the CA is transport.tls.ca_file.
+    #[arg(long, global = true, value_name = "TOKEN")]
     pub token: Option<String>,
     /// Seconds to wait for each answer.
     #[arg(long, global = true, default_value_t = 60)]

@@ -53,7 +53,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Replay(_) => commands::replay::run(&config),
         Command::Bench(args) => commands::bench::run(&config, &args),
         Command::Learner(_) => commands::learner::run(&config),
-        Command::Checkpoints(args) => commands::checkpoints::run(&args),
+        Command::Checkpoints(args) => commands::checkpoints::run(&config, &args),
         Command::Actor(args) => commands::actor::run(&config, &args),
         Command::Train(args) => commands::train::run(&config, &args),
         Command::Reproduce(args) => commands::reproduce::run(&cli.global, &args),

@@ -16,7 +16,8 @@ pub enum ActorError {
     /// The Q-network failed or does not fit the environments.
     #[error("action values: {0}")]
     Values(String),
-    /// The gRPC client could not be built (a bad endpoint).
+    /// The gRPC client could not be built (a bad endpoint, unreadable TLS
+    /// files or token).
     #[error("replay client: {0}")]
     Client(#[from] ClientError),
     /// Shared memory could not be set up.

@@ -19,7 +19,7 @@ use crossroads_config::ActorTransport;
 use crossroads_config::TransportConfig;
 use crossroads_model::QNetwork;
 use crossroads_transport::weights_shm::ShmWeightsSubscriber;
-use crossroads_transport::{LearnerClient, WeightsSlot, WeightsWatch};
+use crossroads_transport::{ClientSecurity, LearnerClient, WeightsSlot, WeightsWatch};
 use crossroads_types::Weights;
 
 use crate::error::ActorError;
@@ -184,8 +184,12 @@ impl WeightsSubscription {
         let worker = match transport {
             ActorTransport::Grpc => {
                 let timeout = Duration::from_millis(connection.connect_timeout_ms);
-                let client = LearnerClient::new(&connection.learner_endpoint, None, timeout)
-                    .map_err(|e| ActorError::Config(format!("transport.learner_endpoint: {e}")))?;
+                let security = ClientSecurity::load(connection)
+                    .map_err(|e| ActorError::Config(e.to_string()))?;
+                let client = LearnerClient::new(&connection.learner_endpoint, &security, timeout)
+                    .map_err(|e| {
+                    ActorError::Config(format!("transport.learner_endpoint: {e}"))
+                })?;
                 let backoff = Backoff::from_config(connection);
                 Worker::Task(tokio::spawn(grpc_worker(
                     client,

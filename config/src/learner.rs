@@ -122,8 +122,11 @@ pub struct LearnerConfig {
     pub best_metric: String,
     /// Whether to resume from the newest checkpoint at start.
     pub resume: bool,
-    /// Bearer token the mutating checkpoint calls (save, restore, delete,
-    /// report evaluation) must carry; none leaves them open. Never logged.
+    /// Removed: the token is no longer written in the config. It lives in
+    /// a file (`transport.auth.token_file`) or the environment
+    /// (`CROSSROADS_TOKEN`) and guards both services. Kept only so that a
+    /// file that still sets it is refused with that advice.
+    #[serde(skip_serializing)]
     pub api_token: Option<String>,
     /// Stop after this many updates (counted over the run's life, so a
     /// resumed run stops at the same step); 0 trains until shutdown.
@@ -169,15 +172,6 @@ impl Default for LearnerConfig {
 }
 
 impl LearnerConfig {
-    /// A copy safe to log or show: the API token replaced.
-    pub fn redacted(&self) -> Self {
-        let mut c = self.clone();
-        if c.api_token.is_some() {
-            c.api_token = Some("<redacted>".to_owned());
-        }
-        c
-    }
-
     /// Range and relation checks, each with its dotted key.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("learner");
@@ -269,11 +263,12 @@ impl LearnerConfig {
             "must name an evaluation metric".to_owned(),
         );
         problems.check(
-            self.api_token
-                .as_ref()
-                .is_none_or(|t| !t.is_empty() && t.chars().all(|c| c.is_ascii_graphic())),
+            self.api_token.is_none(),
             "api_token",
-            "must be non-empty printable ASCII without spaces".to_owned(),
+            "was removed, since a secret does not belong in a config file: write the token \
+             into a file and name it in transport.auth.token_file, or set CROSSROADS_TOKEN; \
+             it now guards the replay's and the learner's state-changing calls"
+                .to_owned(),
         );
         problems.into_vec()
     }

@@ -87,7 +87,7 @@ pub use runtime::RuntimeConfig;
 pub use sim::SimConfig;
 pub use telemetry::{LogFormat, TelemetryConfig};
 pub use train::TrainConfig;
-pub use transport::TransportConfig;
+pub use transport::{AuthConfig, TlsConfig, TransportConfig};
 
 const DEFAULTS: &str = "defaults";
 const COMMAND_LINE: &str = "command line";

@@ -129,7 +129,8 @@ pub struct Manifest {
     pub eval_metrics: BTreeMap<String, f64>,
     /// Weights version the evaluation was of; 0 if none.
     pub eval_weights_version: u64,
-    /// The run's configuration as TOML (the API token redacted).
+    /// The run's configuration as TOML (it holds no secret: the token lives
+    /// in a file or the environment).
     pub config: String,
     /// The other files with their size and checksum.
     pub files: BTreeMap<String, FileEntry>,
@@ -203,7 +204,7 @@ pub struct NewCheckpoint<'a> {
     pub eval_metrics: &'a BTreeMap<String, f64>,
     /// Version it evaluated.
     pub eval_weights_version: u64,
-    /// Config as TOML, redacted.
+    /// Config as TOML.
     pub config: &'a str,
 }
 

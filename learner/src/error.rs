@@ -1,6 +1,7 @@
 //! [`LearnerError`], what can stop the learner or fail one of its calls.
 
 use crossroads_model::ModelError;
+use crossroads_transport::SecurityError;
 use crossroads_transport::grpc::ClientError;
 
 use crate::checkpoint::StoreError;
@@ -43,6 +44,9 @@ pub enum LearnerError {
     /// The gRPC address could not be bound or the server failed.
     #[error("learner gRPC server: {0}")]
     Serve(String),
+    /// The TLS files or the token cannot be used.
+    #[error(transparent)]
+    Security(#[from] SecurityError),
     /// A metric could not be registered.
     #[error("cannot register learner metrics: {0}")]
     Metrics(#[from] prometheus::Error),

@@ -17,8 +17,10 @@ use crossroads_common::{Backoff, Shutdown};
 use crossroads_config::{Config, LearnerConfig};
 use crossroads_model::NetworkSpec;
 use crossroads_proto::v1::learner_server::LearnerServer;
-use crossroads_transport::WeightsSlot;
+use crossroads_transport::auth::LEARNER_OPEN_CALLS;
 use crossroads_transport::grpc::ReplayClient;
+use crossroads_transport::security::SecuredServer;
+use crossroads_transport::{ClientSecurity, ServerSecurity, WeightsSlot};
 use parking_lot::Mutex;
 use prometheus::Registry;
 use tokio::net::TcpListener;
@@ -38,6 +40,11 @@ use crate::training::{Learner, LoopInputs, Shared, StatusView};
 
 /// Priority updates queued for the sender before new ones are dropped.
 const PRIORITY_QUEUE: usize = 64;
+
+/// Longest the gRPC server may take to drain after shutdown before its
+/// connections are dropped (a weights subscriber that stopped reading
+/// would otherwise hold it open for good).
+const DRAIN: Duration = Duration::from_secs(10);
 
 /// A started learner.
 #[derive(Debug)]
@@ -93,6 +100,10 @@ pub async fn start(
     shutdown: Shutdown,
 ) -> Result<RunningLearner, LearnerError> {
     let lc = &config.learner;
+    // TLS files and token first: a missing file stops the start at once.
+    let security = ServerSecurity::load(&config.transport)?;
+    let server = security.builder(LEARNER_OPEN_CALLS)?;
+    let client_security = ClientSecurity::load(&config.transport)?;
     let spec = TrainerConfig::from_config(&config.sim, lc)?.spec;
     if config.runtime.compute_threads > 0 {
         tch::set_num_threads(config.runtime.compute_threads as i32);
@@ -114,7 +125,7 @@ pub async fn start(
         steps: Arc::new(AtomicU64::new(0)),
     });
     let (listener, addr) = bind(lc.listen).await?;
-    let replay = start_replay_conversations(config, spec, &shared, &stop)?;
+    let replay = start_replay_conversations(config, &client_security, spec, &shared, &stop)?;
     let inputs = LoopInputs {
         batches: replay.batches,
         commands,
@@ -124,9 +135,12 @@ pub async fn start(
     };
     let trained = start_training(Arc::clone(&shared), inputs, config, &stop).await?;
     let age_task = spawn_checkpoint_age(metrics, stop.clone());
-    let served = serve(listener, Arc::clone(&shared), stop.clone());
+    let served = serve(server, listener, Arc::clone(&shared), stop.clone());
     tracing::info!(
         %addr,
+        tls = security.tls(),
+        client_certificates = security.client_certificates(),
+        token = security.token(),
         replay = %config.transport.replay_endpoint,
         observation = config.sim.observation().unwrap_or("unresolved"),
         action_set = %config.sim.action_set,
@@ -134,8 +148,15 @@ pub async fn start(
     );
 
     let (prefetch_task, priority_task) = replay.tasks;
+    let drained = stop.clone();
     let task = tokio::spawn(async move {
-        let served = served.await.map_err(|e| LearnerError::Serve(e.to_string()));
+        let served = tokio::select! {
+            r = served => r.map_err(|e| LearnerError::Serve(e.to_string())),
+            _ = async { drained.wait().await; tokio::time::sleep(DRAIN).await } => {
+                tracing::warn!("gRPC connections did not drain in {DRAIN:?}; dropping them");
+                Ok(())
+            }
+        };
         let trained = trained.await.unwrap_or(Err(LearnerError::Stopped));
         let _ = tokio::join!(prefetch_task, priority_task, age_task);
         trained.and(served)
@@ -179,12 +200,13 @@ struct ReplayConversations {
 /// following the training thread's step) and the priority sender.
 fn start_replay_conversations(
     config: &Config,
+    security: &ClientSecurity,
     spec: NetworkSpec,
     shared: &Shared,
     stop: &Shutdown,
 ) -> Result<ReplayConversations, LearnerError> {
     let lc = &config.learner;
-    let client = ReplayClient::new(&config.transport, &config.replay.table)?;
+    let client = ReplayClient::with_security(&config.transport, security, &config.replay.table)?;
     let (batches, prefetch_task) = spawn_prefetch(
         client.clone(),
         PrefetchConfig {
@@ -281,6 +303,7 @@ fn spawn_checkpoint_age(metrics: LearnerMetrics, stop: Shutdown) -> JoinHandle<(
 
 /// The gRPC server on `listener` until `stop` (then it drains).
 fn serve(
+    mut server: SecuredServer,
     listener: TcpListener,
     shared: Arc<Shared>,
     stop: Shutdown,
@@ -288,8 +311,7 @@ fn serve(
     let service = LearnerServer::new(LearnerService::new(shared, stop.clone()))
         .max_decoding_message_size(16 << 20)
         .max_encoding_message_size(usize::MAX);
-    tonic::transport::Server::builder()
-        .tcp_nodelay(true)
+    server
         .add_service(service)
         .serve_with_incoming_shutdown(TcpListenerStream::new(listener), async move {
             stop.wait().await

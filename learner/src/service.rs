@@ -1,7 +1,8 @@
 //! The tonic `Learner` service: weights (stream and latest), checkpoints
 //! (list, get streamed, save, restore, delete), status and evaluation
-//! reports. Converts and validates at the boundary; mutating calls need the
-//! bearer token when `learner.api_token` is set.
+//! reports. Converts and validates at the boundary; the token that
+//! state-changing calls need is checked before them, by the server's
+//! `crossroads_transport::security::TokenLayer`.
 
 use std::collections::BTreeMap;
 use std::io::Read;
@@ -38,26 +39,6 @@ impl LearnerService {
         Self { shared, shutdown }
     }
 
-    /// UNAUTHENTICATED unless the request carries `authorization: Bearer
-    /// <learner.api_token>` (when a token is set).
-    fn authorize<T>(&self, request: &Request<T>) -> Result<(), Status> {
-        let Some(token) = &self.shared.config.learner.api_token else {
-            return Ok(());
-        };
-        let given = request
-            .metadata()
-            .get("authorization")
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "));
-        match given {
-            Some(given) if constant_time_eq(given.as_bytes(), token.as_bytes()) => Ok(()),
-            Some(_) => Err(Status::unauthenticated("wrong bearer token")),
-            None => Err(Status::unauthenticated(
-                "this call needs `authorization: Bearer <token>` (learner.api_token)",
-            )),
-        }
-    }
-
     fn store(&self) -> Result<Arc<CheckpointStore>, Status> {
         self.shared
             .store
@@ -77,10 +58,6 @@ impl LearnerService {
             .map_err(|_| to_status(LearnerError::Stopped))?;
         rx.await.map_err(|_| to_status(LearnerError::Stopped))
     }
-}
-
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
 /// The gRPC status of a learner error.
@@ -132,7 +109,13 @@ impl pb::learner_server::Learner for LearnerService {
             loop {
                 if let Some(w) = watch.newer_than(have) {
                     have = w.version;
-                    if tx.send(Ok(weights_to_wire(&w))).await.is_err() {
+                    // A subscriber that stops reading must not hold the
+                    // server's graceful shutdown open.
+                    let sent = tokio::select! {
+                        sent = tx.send(Ok(weights_to_wire(&w))) => sent.is_ok(),
+                        _ = shutdown.wait() => false,
+                    };
+                    if !sent {
                         break;
                     }
                 }
@@ -204,9 +187,8 @@ impl pb::learner_server::Learner for LearnerService {
 
     async fn save_checkpoint(
         &self,
-        request: Request<pb::SaveCheckpointRequest>,
+        _request: Request<pb::SaveCheckpointRequest>,
     ) -> Result<Response<pb::CheckpointInfo>, Status> {
-        self.authorize(&request)?;
         self.store()?;
         let entry = self.command(Command::Save).await?.map_err(to_status)?;
         Ok(Response::new(checkpoint_to_wire(&CheckpointSummary::from(
@@ -218,7 +200,6 @@ impl pb::learner_server::Learner for LearnerService {
         &self,
         request: Request<pb::RestoreCheckpointRequest>,
     ) -> Result<Response<pb::RestoreCheckpointResponse>, Status> {
-        self.authorize(&request)?;
         let id = request.into_inner().id;
         let store = self.store()?;
         {
@@ -239,7 +220,6 @@ impl pb::learner_server::Learner for LearnerService {
         &self,
         request: Request<pb::DeleteCheckpointRequest>,
     ) -> Result<Response<pb::DeleteCheckpointResponse>, Status> {
-        self.authorize(&request)?;
         let id = request.into_inner().id;
         let store = self.store()?;
         blocking(move || store.delete(&id)).await?;
@@ -251,8 +231,7 @@ impl pb::learner_server::Learner for LearnerService {
         _request: Request<pb::StatusRequest>,
     ) -> Result<Response<pb::LearnerStatus>, Status> {
         let s = self.shared.status.lock().clone();
-        let mut config = self.shared.config.clone();
-        config.learner = config.learner.redacted();
+        let config = &self.shared.config;
         Ok(Response::new(pb::LearnerStatus {
             update_step: s.update_step,
             weights_version: s.weights_version,
@@ -270,7 +249,6 @@ impl pb::learner_server::Learner for LearnerService {
         &self,
         request: Request<pb::ReportEvaluationRequest>,
     ) -> Result<Response<pb::ReportEvaluationResponse>, Status> {
-        self.authorize(&request)?;
         let r = request.into_inner();
         if r.metrics.is_empty() {
             return Err(Status::invalid_argument("metrics: empty"));

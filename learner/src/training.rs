@@ -419,8 +419,6 @@ impl Learner {
             .ok_or(LearnerError::NoCheckpoints)?;
         let state = self.trainer.state(self.version)?;
         let config = &self.shared.config;
-        let mut redacted = config.clone();
-        redacted.learner = config.learner.redacted();
         let entry = store.write(&NewCheckpoint {
             state: &state,
             weights_version: self.version,
@@ -429,7 +427,7 @@ impl Learner {
             optimizer: self.trainer.config().optimizer.name(),
             eval_metrics: &self.eval.1,
             eval_weights_version: self.eval.0,
-            config: &redacted.to_toml(),
+            config: &config.to_toml(),
         })?;
         self.shared.metrics.checkpoints.inc();
         self.mark_checkpoint_time(entry.manifest.created_unix_ms);

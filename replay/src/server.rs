@@ -17,7 +17,9 @@ use std::time::Duration;
 use crossroads_common::Shutdown;
 use crossroads_config::Config;
 use crossroads_proto::v1::replay_server::ReplayServer as PbServer;
+use crossroads_transport::auth::REPLAY_OPEN_CALLS;
 use crossroads_transport::shm::ShmError;
+use crossroads_transport::{SecurityError, ServerSecurity};
 use prometheus::Registry;
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
@@ -47,6 +49,9 @@ pub enum ServerError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The TLS files or the token cannot be used.
+    #[error(transparent)]
+    Security(#[from] SecurityError),
     /// A metric could not be registered.
     #[error("cannot register replay metrics: {0}")]
     Metrics(#[from] prometheus::Error),
@@ -113,6 +118,9 @@ pub async fn start(
     shutdown: Shutdown,
 ) -> Result<RunningServer, ServerError> {
     let rc = &config.replay;
+    // TLS files and token first: a missing file stops the start at once.
+    let security = ServerSecurity::load(&config.transport)?;
+    let mut builder = security.builder(REPLAY_OPEN_CALLS)?;
     let metrics = ReplayMetrics::new(registry)?;
     let table_config = TableConfig::from_config(rc);
     let table = Arc::new(Table::new(table_config, metrics.table(&rc.table)));
@@ -172,14 +180,22 @@ pub async fn start(
     let service = PbServer::new(ReplayService::new(state.clone()))
         .max_decoding_message_size(rc.max_message_bytes)
         .max_encoding_message_size(usize::MAX);
-    let serve = tonic::transport::Server::builder()
-        .tcp_nodelay(true)
-        .add_service(service)
-        .serve_with_incoming_shutdown(TcpListenerStream::new(listener), {
+    let serve = builder.add_service(service).serve_with_incoming_shutdown(
+        TcpListenerStream::new(listener),
+        {
             let shutdown = shutdown.clone();
             async move { shutdown.wait().await }
-        });
-    tracing::info!(%addr, table = %rc.table, capacity = rc.capacity, "replay server listening");
+        },
+    );
+    tracing::info!(
+        %addr,
+        table = %rc.table,
+        capacity = rc.capacity,
+        tls = security.tls(),
+        client_certificates = security.client_certificates(),
+        token = security.token(),
+        "replay server listening"
+    );
 
     let task_state = state.clone();
     let task = tokio::spawn(async move {

@@ -4,18 +4,26 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::Context;
-use crossroads_transport::LearnerClient;
+use crossroads_config::Config;
+use crossroads_transport::auth::Token;
 use crossroads_transport::convert::CheckpointSummary;
+use crossroads_transport::{ClientSecurity, LearnerClient};
 
 use crate::cli::{CheckpointsAction, CheckpointsArgs};
 
-/// Runs one checkpoint command against the learner.
-pub fn run(args: &CheckpointsArgs) -> anyhow::Result<ExitCode> {
+/// Runs one checkpoint command against the learner, with the TLS
+/// settings and token of `config.transport` (`--token` overrides the
+/// token).
+pub fn run(config: &Config, args: &CheckpointsArgs) -> anyhow::Result<ExitCode> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(act(args))?;
+    let mut security = ClientSecurity::load(&config.transport)?;
+    if let Some(token) = &args.token {
+        security = security.with_token(Some(Token::new(token, "--token")?));
+    }
+    runtime.block_on(act(args, &security))?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -54,10 +62,10 @@ fn line(c: &CheckpointSummary) -> String {
 const HEADER: &str =
     "id                       update_step   version   size MiB scenario        evaluation";
 
-async fn act(args: &CheckpointsArgs) -> anyhow::Result<()> {
+async fn act(args: &CheckpointsArgs, security: &ClientSecurity) -> anyhow::Result<()> {
     let client = LearnerClient::new(
         &args.learner,
-        args.token.clone(),
+        security,
         Duration::from_secs(args.timeout.max(1)),
     )?;
     let at = &args.learner;

@@ -14,9 +14,7 @@ pub fn run(config: &Config) -> anyhow::Result<ExitCode> {
 }
 
 async fn serve(config: &Config) -> anyhow::Result<()> {
-    let mut shown = config.clone();
-    shown.learner = config.learner.redacted();
-    tracing::info!(config = %shown.to_toml(), "crossroads learner starting");
+    tracing::info!(config = %config.to_toml(), "crossroads learner starting");
     let role = Role::start(config, "learner").await?;
     let result = async {
         let learner =

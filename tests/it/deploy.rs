@@ -758,3 +758,143 @@ impl Drop for RemoveImage {
         let _ = Command::new("docker").args(["rmi", "-f", &self.0]).output();
     }
 }
+
+// ---------------------------------------------------------------------------
+// TLS and tokens
+
+/// The certificates `deploy/make-certs.sh` writes into a temporary folder.
+fn make_certs() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temp dir");
+    run(Command::new(repo().join("deploy/make-certs.sh")).arg(dir.path()));
+    dir
+}
+
+/// The TLS override over compose.yaml resolves for every role (monitoring
+/// profile included): https endpoints, the files mounted read-only where
+/// the settings point, and nothing else changed.
+#[test]
+#[ignore = "needs docker compose (scripts/setup-deploy.sh): \
+            CROSSROADS_REQUIRE_DOCKER=1 cargo test -- --include-ignored"]
+fn compose_tls_override_mounts_the_certificates_into_every_role() {
+    let Some(program) = compose_program() else {
+        assert!(
+            !required(),
+            "neither `docker compose` nor `docker-compose` works"
+        );
+        eprintln!("skipped: no docker compose");
+        return;
+    };
+    let certs = make_certs();
+    let out = run(Command::new(&program[0])
+        .args(&program[1..])
+        .arg("-f")
+        .arg(repo().join("deploy/compose.yaml"))
+        .arg("-f")
+        .arg(repo().join("deploy/compose.tls.yaml"))
+        .args(["--profile", "monitoring", "config"])
+        .env("CERTS", certs.path())
+        .env_remove("COMPOSE_FILE"));
+    let config = text(&out);
+    for role in ["replay", "learner", "actor", "evaluator"] {
+        // The service's block: from its name at two spaces' indent to the
+        // next name there (both compose generations print that layout).
+        let head = format!("\n  {role}:\n");
+        let start = config
+            .find(&head)
+            .unwrap_or_else(|| panic!("no {role}: {config}"));
+        let rest = &config[start + head.len()..];
+        let end = rest
+            .match_indices('\n')
+            .map(|(i, _)| i + 1)
+            .find(|&i| {
+                let line = &rest[i..];
+                line.starts_with("  ") && !line.starts_with("   ") || !line.starts_with(' ')
+            })
+            .unwrap_or(rest.len());
+        let service = &rest[..end];
+        assert!(
+            service.contains("CROSSROADS_TRANSPORT__REPLAY_ENDPOINT: https://replay:50051")
+                && service
+                    .contains("CROSSROADS_TRANSPORT__LEARNER_ENDPOINT: https://learner:50052"),
+            "{role}: {service}"
+        );
+        for (key, file) in [
+            ("TLS__CERT_FILE", "server.pem"),
+            ("TLS__KEY_FILE", "server.key"),
+            ("TLS__CLIENT_CA_FILE", "ca.pem"),
+            ("TLS__CA_FILE", "ca.pem"),
+            ("TLS__CLIENT_CERT_FILE", "client.pem"),
+            ("TLS__CLIENT_KEY_FILE", "client.key"),
+            ("AUTH__TOKEN_FILE", "token"),
+        ] {
+            let line = format!("CROSSROADS_TRANSPORT__{key}: /run/crossroads/tls/{file}");
+            assert!(service.contains(&line), "{role}: no {line:?} in {service}");
+            assert!(certs.path().join(file).is_file(), "{file} not made");
+        }
+        let source = certs.path().display().to_string();
+        assert!(
+            service.contains(&format!("{source}:/run/crossroads/tls:ro"))
+                || (service.contains(&format!("source: {source}"))
+                    && service.contains("target: /run/crossroads/tls")
+                    && service.contains("read_only: true")),
+            "{role}: the certificates are not mounted read-only: {service}"
+        );
+    }
+}
+
+/// The TLS overlay renders with kustomize, matches the schemas (with the
+/// example Secret), and mounts the Secret and the settings into every
+/// workload.
+#[test]
+#[ignore = "needs kubectl and kubernetes-validate (scripts/setup-deploy.sh, scripts/setup-python.sh): \
+            CROSSROADS_REQUIRE_DOCKER=1 cargo test -- --include-ignored"]
+fn kubernetes_tls_overlay_mounts_the_secret_into_every_workload() {
+    if !have("kubectl", &["version", "--client"]) {
+        return;
+    }
+    let overlay = repo().join("deploy/k8s-tls");
+    let rendered = text(&run(Command::new("kubectl").arg("kustomize").arg(&overlay)));
+    let workloads: Vec<&str> = rendered
+        .split("\n---\n")
+        .filter(|d| d.contains("kind: Deployment") || d.contains("kind: StatefulSet"))
+        .collect();
+    assert_eq!(workloads.len(), 4, "{rendered}");
+    let env_map = rendered
+        .split("\n---\n")
+        .find(|d| d.contains("name: crossroads-tls-env"))
+        .expect("the settings' ConfigMap");
+    let env_name = env_map
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("name: crossroads-tls-env"))
+        .map(|suffix| format!("crossroads-tls-env{suffix}"))
+        .expect("its name");
+    assert!(
+        env_map.contains("CROSSROADS_TRANSPORT__REPLAY_ENDPOINT: https://crossroads-replay:50051")
+    );
+    assert!(env_map.contains("CROSSROADS_TRANSPORT__AUTH__TOKEN_FILE: /etc/crossroads/tls/token"));
+    for w in &workloads {
+        assert!(w.contains("secretName: crossroads-tls"), "{w}");
+        assert!(w.contains("mountPath: /etc/crossroads/tls"), "{w}");
+        assert!(w.contains(&format!("name: {env_name}")), "{w}");
+        assert!(w.contains("fsGroup: 10001"), "{w}");
+    }
+    if !validator().exists() {
+        assert!(
+            !required(),
+            "{} is missing; scripts/setup-python.sh installs it",
+            validator().display()
+        );
+        eprintln!("skipped: no kubernetes-validate");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("rendered.yaml");
+    let secret = std::fs::read_to_string(overlay.join("secret.example.yaml")).expect("secret");
+    std::fs::write(&file, format!("{rendered}\n---\n{secret}")).expect("write");
+    let out = run(Command::new(validator())
+        .args(["--strict", "--no-warn"])
+        .arg(&file));
+    let report = format!("{}{}", text(&out), String::from_utf8_lossy(&out.stderr));
+    assert!(!report.contains("failed"), "{report}");
+    assert!(report.contains("secret/crossroads-tls"), "{report}");
+}

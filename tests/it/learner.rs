@@ -17,6 +17,7 @@ fn spawn(args: &[&str], ready: &str) -> (Child, String) {
         .args(["--set", "telemetry.metrics=false"])
         .args(args)
         .env_remove("CROSSROADS_CONFIG")
+        .env_remove("CROSSROADS_TOKEN")
         .env("RUST_LOG", "info")
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
@@ -66,7 +67,7 @@ fn checkpoints(learner: &str, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_crossroads"))
         .args(["checkpoints", "--learner", &format!("http://{learner}")])
         .args(args)
-        .env_remove("CROSSROADS_LEARNER_TOKEN")
+        .env_remove("CROSSROADS_TOKEN")
         .output()
         .expect("run crossroads checkpoints")
 }
@@ -90,7 +91,7 @@ fn fill(replay: &str, config: &crossroads_config::Config) {
         .expect("fill the replay");
 }
 
-fn learner_args<'a>(replay: &'a str, dir: &'a Path) -> Vec<String> {
+fn learner_args(replay: &str, dir: &Path, token_file: &Path) -> Vec<String> {
     vec![
         "--set".into(),
         "sim.action_set=sequential".into(),
@@ -99,7 +100,7 @@ fn learner_args<'a>(replay: &'a str, dir: &'a Path) -> Vec<String> {
         "--set".into(),
         "learner.batch_size=16".into(),
         "--set".into(),
-        "learner.api_token=tok3n".into(),
+        format!("transport.auth.token_file={}", token_file.display()),
         "learner".into(),
         "--listen".into(),
         "127.0.0.1:0".into(),
@@ -132,7 +133,10 @@ fn learner_and_checkpoints_commands_work_together() {
     fill(&replay_addr, &config);
 
     let ckpts = dir.path().join("ckpts");
-    let args = learner_args(&replay_addr, &ckpts);
+    // The learner's token comes from a file (a mounted secret, say).
+    let token_file = dir.path().join("token");
+    std::fs::write(&token_file, "tok3n\n").expect("token file");
+    let args = learner_args(&replay_addr, &ckpts, &token_file);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let (learner, addr) = spawn(&args, "learner listening");
 

@@ -10,6 +10,7 @@ mod learner;
 mod procs;
 mod replay;
 mod reproduce;
+mod security;
 mod setup_libtorch;
 mod sim_commands;
 mod sumo;

@@ -19,21 +19,17 @@ use crossroads_proto::v1::replay_client::ReplayClient as PbClient;
 use crossroads_types::batch::{BatchError, TransitionBatch};
 use crossroads_types::{PrioritiesUpdated, Sample};
 use tokio::sync::mpsc;
-use tonic::transport::{Channel, Endpoint};
 
+use crate::channel::{AuthChannel, connect};
+use crate::security::{ClientSecurity, SecurityError, error_chain};
 use crate::wire;
 
 /// Why a replay call failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
-    /// The endpoint is not a valid URL.
-    #[error("invalid replay endpoint {endpoint:?}: {message}")]
-    Endpoint {
-        /// The endpoint.
-        endpoint: String,
-        /// The parse error.
-        message: String,
-    },
+    /// The endpoint, the TLS files or the token cannot be used.
+    #[error(transparent)]
+    Security(#[from] SecurityError),
     /// The server answered with an error status.
     #[error("replay server: {code:?}: {message}")]
     Status {
@@ -88,8 +84,49 @@ impl From<tonic::Status> for ClientError {
     fn from(s: tonic::Status) -> Self {
         ClientError::Status {
             code: s.code(),
-            message: s.message().to_owned(),
+            message: status_message(&s),
         }
+    }
+}
+
+/// A status's message with its sources (a failed connection or TLS
+/// handshake says why only there).
+pub(crate) fn status_message(s: &tonic::Status) -> String {
+    match std::error::Error::source(s) {
+        Some(source) => {
+            let chain = error_chain(source);
+            if chain.starts_with(s.message()) {
+                chain
+            } else {
+                format!("{}: {chain}", s.message())
+            }
+        }
+        None => s.message().to_owned(),
+    }
+}
+
+/// `message`, with a hint when a plain-text client's connection broke the
+/// way a TLS server breaks it: it answers plain HTTP/2 with an alert (read
+/// as an oversized frame) and closes, which says nothing about TLS by
+/// itself. A refused connection (a server that is down) gets no hint.
+pub(crate) fn hint_plain_text(status: &tonic::Status, endpoint: &str, message: String) -> String {
+    const SIGNS: [&str; 4] = [
+        "frame with invalid size",
+        "broken pipe",
+        "connection reset",
+        "connection closed",
+    ];
+    let lower = message.to_ascii_lowercase();
+    if endpoint.starts_with("http://")
+        && std::error::Error::source(status).is_some()
+        && SIGNS.iter().any(|s| lower.contains(s))
+    {
+        format!(
+            "{message} (if the server speaks TLS, reach it at https:// with \
+             transport.tls.ca_file set)"
+        )
+    } else {
+        message
     }
 }
 
@@ -178,31 +215,40 @@ pub struct SnapshotWritten {
 /// (clones share the HTTP/2 connection).
 #[derive(Debug, Clone)]
 pub struct ReplayClient {
-    inner: PbClient<Channel>,
+    inner: PbClient<AuthChannel>,
+    endpoint: String,
     table: String,
     request_timeout: Duration,
     max_message_bytes: usize,
 }
 
 impl ReplayClient {
-    /// A client of `config.replay_endpoint`. It connects lazily: a server
-    /// that is not up yet makes calls fail with a retryable error, not this
-    /// constructor. Must be called inside a tokio runtime.
+    /// A client of `config.replay_endpoint`, with the TLS settings and
+    /// token of `config.tls` and `config.auth` (their files are read now).
+    /// It connects lazily: a server that is not up yet makes calls fail
+    /// with a retryable error, not this constructor. Must be called inside
+    /// a tokio runtime.
     pub fn new(config: &TransportConfig, table: &str) -> Result<Self, ClientError> {
-        let endpoint = Endpoint::from_shared(config.replay_endpoint.clone())
-            .map_err(|e| ClientError::Endpoint {
-                endpoint: config.replay_endpoint.clone(),
-                message: e.to_string(),
-            })?
-            .connect_timeout(Duration::from_millis(config.connect_timeout_ms))
-            .tcp_nodelay(true)
-            .http2_keep_alive_interval(Duration::from_secs(10))
-            .keep_alive_timeout(Duration::from_secs(20));
+        Self::with_security(config, &ClientSecurity::load(config)?, table)
+    }
+
+    /// [`ReplayClient::new`] with TLS settings and token already loaded.
+    pub fn with_security(
+        config: &TransportConfig,
+        security: &ClientSecurity,
+        table: &str,
+    ) -> Result<Self, ClientError> {
+        let channel = connect(
+            &config.replay_endpoint,
+            security,
+            Duration::from_millis(config.connect_timeout_ms),
+        )?;
         let max_message_bytes = 1 << 30;
         Ok(Self {
-            inner: PbClient::new(endpoint.connect_lazy())
+            inner: PbClient::new(channel)
                 .max_decoding_message_size(max_message_bytes)
                 .max_encoding_message_size(max_message_bytes),
+            endpoint: config.replay_endpoint.clone(),
             table: table.to_owned(),
             request_timeout: Duration::from_millis(config.request_timeout_ms),
             max_message_bytes,
@@ -215,7 +261,7 @@ impl ReplayClient {
     }
 
     /// The generated client, for one call (clones share the connection).
-    fn rpc(&self) -> PbClient<Channel> {
+    fn rpc(&self) -> PbClient<AuthChannel> {
         self.inner.clone()
     }
 
@@ -228,7 +274,10 @@ impl ReplayClient {
         let limit = self.request_timeout + extra;
         match tokio::time::timeout(limit, call).await {
             Ok(Ok(response)) => Ok(response.into_inner()),
-            Ok(Err(status)) => Err(status.into()),
+            Ok(Err(status)) => Err(ClientError::Status {
+                code: status.code(),
+                message: hint_plain_text(&status, &self.endpoint, status_message(&status)),
+            }),
             Err(_) => Err(ClientError::Timeout(limit)),
         }
     }

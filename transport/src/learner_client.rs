@@ -11,21 +11,18 @@ use crossroads_proto::v1 as pb;
 use crossroads_proto::v1::learner_client::LearnerClient as PbClient;
 use crossroads_types::Weights;
 use crossroads_types::checkpoint::check_checkpoint_id;
-use tonic::transport::{Channel, Endpoint};
 
+use crate::channel::{AuthChannel, connect};
 use crate::convert::{CheckpointSummary, checkpoint_from_wire, weights_from_wire};
+use crate::grpc::{hint_plain_text, status_message};
+use crate::security::{ClientSecurity, SecurityError};
 
 /// Why a learner call failed.
 #[derive(Debug, thiserror::Error)]
 pub enum LearnerClientError {
-    /// The URL is not valid.
-    #[error("invalid learner endpoint {endpoint:?}: {message}")]
-    Endpoint {
-        /// The URL.
-        endpoint: String,
-        /// Why.
-        message: String,
-    },
+    /// The endpoint, the TLS files or the token cannot be used.
+    #[error(transparent)]
+    Security(#[from] SecurityError),
     /// The learner answered with an error status.
     #[error("learner: {code:?}: {message}")]
     Status {
@@ -66,7 +63,7 @@ impl From<tonic::Status> for LearnerClientError {
     fn from(s: tonic::Status) -> Self {
         LearnerClientError::Status {
             code: s.code(),
-            message: s.message().to_owned(),
+            message: status_message(&s),
         }
     }
 }
@@ -115,49 +112,28 @@ impl LearnerStatus {
 /// A connection to a learner. Cheap to clone.
 #[derive(Debug, Clone)]
 pub struct LearnerClient {
-    inner: PbClient<Channel>,
-    token: Option<String>,
+    inner: PbClient<AuthChannel>,
+    endpoint: String,
     timeout: Duration,
 }
 
 impl LearnerClient {
-    /// A client of `url` (e.g. `http://127.0.0.1:50052`), sending `token`
-    /// as a bearer token when given; connects lazily. Must be called inside
-    /// a tokio runtime.
+    /// A client of `url` (e.g. `http://127.0.0.1:50052`), with TLS for
+    /// `https://` and the token on every call as `security` says; connects
+    /// lazily. `timeout` bounds connecting and each answer. Must be called
+    /// inside a tokio runtime.
     pub fn new(
         url: &str,
-        token: Option<String>,
+        security: &ClientSecurity,
         timeout: Duration,
     ) -> Result<Self, LearnerClientError> {
-        let endpoint = Endpoint::from_shared(url.to_owned())
-            .map_err(|e| LearnerClientError::Endpoint {
-                endpoint: url.to_owned(),
-                message: e.to_string(),
-            })?
-            .connect_timeout(timeout)
-            .tcp_nodelay(true);
         Ok(Self {
-            inner: PbClient::new(endpoint.connect_lazy())
+            inner: PbClient::new(connect(url, security, timeout)?)
                 .max_decoding_message_size(1 << 30)
                 .max_encoding_message_size(16 << 20),
-            token,
+            endpoint: url.to_owned(),
             timeout,
         })
-    }
-
-    fn request<T>(&self, message: T) -> Result<tonic::Request<T>, LearnerClientError> {
-        let mut r = tonic::Request::new(message);
-        if let Some(token) = &self.token {
-            let value =
-                format!("Bearer {token}")
-                    .parse()
-                    .map_err(|_| LearnerClientError::Endpoint {
-                        endpoint: "token".to_owned(),
-                        message: "the token is not valid in an HTTP header".to_owned(),
-                    })?;
-            r.metadata_mut().insert("authorization", value);
-        }
-        Ok(r)
     }
 
     async fn bounded<T>(
@@ -166,7 +142,10 @@ impl LearnerClient {
     ) -> Result<T, LearnerClientError> {
         match tokio::time::timeout(self.timeout, call).await {
             Ok(Ok(r)) => Ok(r.into_inner()),
-            Ok(Err(s)) => Err(s.into()),
+            Ok(Err(s)) => Err(LearnerClientError::Status {
+                code: s.code(),
+                message: hint_plain_text(&s, &self.endpoint, status_message(&s)),
+            }),
             Err(_) => Err(LearnerClientError::Timeout(self.timeout)),
         }
     }
@@ -175,7 +154,7 @@ impl LearnerClient {
     pub async fn list(&self) -> Result<Vec<CheckpointSummary>, LearnerClientError> {
         let mut c = self.inner.clone();
         let r = self
-            .bounded(c.list_checkpoints(self.request(pb::ListCheckpointsRequest {})?))
+            .bounded(c.list_checkpoints(pb::ListCheckpointsRequest {}))
             .await?;
         Ok(r.checkpoints
             .into_iter()
@@ -187,7 +166,7 @@ impl LearnerClient {
     pub async fn save(&self) -> Result<CheckpointSummary, LearnerClientError> {
         let mut c = self.inner.clone();
         let r = self
-            .bounded(c.save_checkpoint(self.request(pb::SaveCheckpointRequest {})?))
+            .bounded(c.save_checkpoint(pb::SaveCheckpointRequest {}))
             .await?;
         Ok(checkpoint_from_wire(r))
     }
@@ -197,9 +176,7 @@ impl LearnerClient {
     pub async fn restore(&self, id: &str) -> Result<(CheckpointSummary, u64), LearnerClientError> {
         let mut c = self.inner.clone();
         let r = self
-            .bounded(c.restore_checkpoint(
-                self.request(pb::RestoreCheckpointRequest { id: id.to_owned() })?,
-            ))
+            .bounded(c.restore_checkpoint(pb::RestoreCheckpointRequest { id: id.to_owned() }))
             .await?;
         let info = r
             .checkpoint
@@ -210,19 +187,15 @@ impl LearnerClient {
     /// Removes a checkpoint.
     pub async fn delete(&self, id: &str) -> Result<(), LearnerClientError> {
         let mut c = self.inner.clone();
-        self.bounded(
-            c.delete_checkpoint(self.request(pb::DeleteCheckpointRequest { id: id.to_owned() })?),
-        )
-        .await?;
+        self.bounded(c.delete_checkpoint(pb::DeleteCheckpointRequest { id: id.to_owned() }))
+            .await?;
         Ok(())
     }
 
     /// Where training stands.
     pub async fn status(&self) -> Result<LearnerStatus, LearnerClientError> {
         let mut c = self.inner.clone();
-        let status = self
-            .bounded(c.status(self.request(pb::StatusRequest {})?))
-            .await?;
+        let status = self.bounded(c.status(pb::StatusRequest {})).await?;
         Ok(LearnerStatus::from_wire(status))
     }
 
@@ -233,12 +206,10 @@ impl LearnerClient {
         metrics: BTreeMap<String, f64>,
     ) -> Result<(), LearnerClientError> {
         let mut c = self.inner.clone();
-        self.bounded(
-            c.report_evaluation(self.request(pb::ReportEvaluationRequest {
-                weights_version,
-                metrics: metrics.into_iter().collect(),
-            })?),
-        )
+        self.bounded(c.report_evaluation(pb::ReportEvaluationRequest {
+            weights_version,
+            metrics: metrics.into_iter().collect(),
+        }))
         .await?;
         Ok(())
     }
@@ -247,7 +218,7 @@ impl LearnerClient {
     pub async fn latest_weights(&self) -> Result<Weights, LearnerClientError> {
         let mut c = self.inner.clone();
         let w = self
-            .bounded(c.get_latest_weights(self.request(pb::GetLatestWeightsRequest {})?))
+            .bounded(c.get_latest_weights(pb::GetLatestWeightsRequest {}))
             .await?;
         weights_from_wire(w).map_err(LearnerClientError::Invalid)
     }
@@ -260,9 +231,7 @@ impl LearnerClient {
     ) -> Result<WeightsStream, LearnerClientError> {
         let mut c = self.inner.clone();
         let stream = self
-            .bounded(
-                c.subscribe_weights(self.request(pb::SubscribeWeightsRequest { have_version })?),
-            )
+            .bounded(c.subscribe_weights(pb::SubscribeWeightsRequest { have_version }))
             .await?;
         Ok(WeightsStream { stream })
     }
@@ -278,9 +247,7 @@ impl LearnerClient {
     ) -> Result<(CheckpointSummary, PathBuf), LearnerClientError> {
         let mut c = self.inner.clone();
         let mut stream = self
-            .bounded(
-                c.get_checkpoint(self.request(pb::GetCheckpointRequest { id: id.to_owned() })?),
-            )
+            .bounded(c.get_checkpoint(pb::GetCheckpointRequest { id: id.to_owned() }))
             .await?;
         let io = |action: &'static str, path: &Path| {
             let path = path.to_path_buf();

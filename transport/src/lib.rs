@@ -20,6 +20,12 @@
 //! - [`weights_slot`]: [`WeightsSlot`], the newest
 //!   [`Weights`](crossroads_types::Weights) a process holds: the learner's
 //!   for its gRPC stream, an actor's for its network.
+//! - [`security`]: TLS and the token of `[transport.tls]` and
+//!   `[transport.auth]`, loaded once at start: [`ServerSecurity`] builds
+//!   both tonic servers, [`ClientSecurity`] what every client needs;
+//!   [`auth`] the token itself, the header clients send and the layer
+//!   that refuses guarded calls without it; [`channel`] the one place a
+//!   gRPC channel is built.
 //! - [`convert`]: network specs, weights and checkpoint descriptions
 //!   ([`CheckpointSummary`]) between `crossroads_proto` and the domain.
 //!
@@ -33,10 +39,13 @@
 //! crate only in `crossroads_proto` and the tonic services that implement
 //! it.
 
+pub mod auth;
+pub mod channel;
 pub mod convert;
 pub mod grpc;
 pub mod iox;
 pub mod learner_client;
+pub mod security;
 pub mod shm;
 pub mod weights_shm;
 pub mod weights_slot;
@@ -48,6 +57,7 @@ pub use grpc::{
     SnapshotWritten, TableInfo,
 };
 pub use learner_client::{LearnerClient, LearnerClientError, LearnerStatus, WeightsStream};
+pub use security::{ClientSecurity, SecurityError, ServerSecurity};
 pub use shm::{ShmBatchPublisher, ShmError};
 pub use weights_shm::{ShmWeightsPublisher, ShmWeightsSubscriber};
 pub use weights_slot::{WeightsSlot, WeightsWatch};

@@ -377,3 +377,59 @@ fn between_an_old_key_and_its_new_one_the_later_layer_wins() {
         "{notes:#?}"
     );
 }
+
+/// The config's own checks, before any file is read: pairs, https without
+/// a CA, TLS servers behind http:// endpoints, the removed token key.
+#[test]
+fn security_settings_are_checked_when_the_config_loads() {
+    let problems = |sets: &[&str]| -> Vec<(String, String)> {
+        ConfigLoader::new()
+            .without_env()
+            .sets(sets.iter().copied())
+            .load()
+            .expect_err("invalid")
+            .problems()
+            .iter()
+            .map(|p| (p.key.clone(), p.problem.clone()))
+            .collect()
+    };
+    let has = |p: &[(String, String)], key: &str, says: &str| {
+        assert!(
+            p.iter().any(|(k, m)| k == key && m.contains(says)),
+            "no {key:?} saying {says:?} in {p:?}"
+        );
+    };
+    let p = problems(&["transport.replay_endpoint=https://replay:50051"]);
+    has(&p, "transport.tls.ca_file", "https://replay:50051");
+    let p = problems(&["transport.tls.cert_file=/tls/server.pem"]);
+    has(&p, "transport.tls.key_file", "transport.tls.cert_file");
+    has(&p, "transport.replay_endpoint", "https://");
+    has(&p, "transport.learner_endpoint", "https://");
+    let p = problems(&["transport.tls.client_ca_file=/tls/ca.pem"]);
+    has(&p, "transport.tls.client_ca_file", "cert_file");
+    let p = problems(&["transport.tls.client_cert_file=/tls/client.pem"]);
+    has(&p, "transport.tls.client_key_file", "client_cert_file");
+    let p = problems(&["transport.auth.token_env=NOT A NAME"]);
+    has(&p, "transport.auth.token_env", "environment variable name");
+    let p = problems(&["learner.api_token=s3cret"]);
+    has(&p, "learner.api_token", "transport.auth.token_file");
+
+    // A whole secure run's settings load, without reading the files.
+    let config = ConfigLoader::new()
+        .without_env()
+        .sets([
+            "transport.replay_endpoint=https://replay:50051",
+            "transport.learner_endpoint=https://learner:50052",
+            "transport.tls.cert_file=/tls/server.pem",
+            "transport.tls.key_file=/tls/server.key",
+            "transport.tls.client_ca_file=/tls/ca.pem",
+            "transport.tls.ca_file=/tls/ca.pem",
+            "transport.tls.client_cert_file=/tls/client.pem",
+            "transport.tls.client_key_file=/tls/client.key",
+            "transport.auth.token_file=/tls/token",
+        ])
+        .load()
+        .expect("valid");
+    assert!(config.transport.tls.serves_tls());
+    assert!(!config.to_toml().contains("api_token"));
+}

@@ -9,8 +9,9 @@ use crossroads_common::Shutdown;
 use crossroads_config::Config;
 use crossroads_learner::bench::fill_replay;
 use crossroads_learner::{RunningLearner, TrainerConfig};
-use crossroads_transport::LearnerClient;
+use crossroads_transport::auth::Token;
 use crossroads_transport::grpc::ReplayClient;
+use crossroads_transport::{ClientSecurity, LearnerClient};
 use tonic::Code;
 
 const TOKEN: &str = "s3cret-token";
@@ -53,7 +54,12 @@ fn learner_config(checkpoints: &Path) -> Config {
     c.learner.checkpoint_every = 0;
     c.learner.checkpoint_dir = Some(checkpoints.to_path_buf());
     c.learner.shm_publish = false;
-    c.learner.api_token = Some(TOKEN.to_owned());
+    // The token from a file, as a mounted secret would give it; the
+    // learner's replay client sends it too.
+    let token_file = checkpoints.with_file_name("token");
+    std::fs::create_dir_all(checkpoints.parent().expect("a parent")).expect("test setup");
+    std::fs::write(&token_file, format!("{TOKEN}\n")).expect("test setup");
+    c.transport.auth.token_file = Some(token_file);
     c
 }
 
@@ -70,9 +76,10 @@ async fn start_learner(
 }
 
 fn client(learner: &RunningLearner, token: Option<&str>) -> LearnerClient {
+    let token = token.map(|t| Token::new(t, "test").expect("test setup"));
     LearnerClient::new(
         &format!("http://{}", learner.local_addr()),
-        token.map(str::to_owned),
+        &ClientSecurity::none().with_token(token),
         Duration::from_secs(30),
     )
     .expect("test setup")

@@ -156,7 +156,7 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
     let server = crossroads_replay::start(&c, None, servers.clone())
         .await
         .context("starting a replay server")?;
-    c.transport.replay_endpoint = format!("http://{}", server.local_addr());
+    c.transport.replay_endpoint = format!("{}://{}", c.transport.tls.scheme(), server.local_addr());
     let table = server
         .table(&c.replay.table)
         .context("the replay server has no table")?;

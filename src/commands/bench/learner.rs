@@ -114,7 +114,7 @@ async fn fed_runs(config: &Config, o: &Options) -> anyhow::Result<Vec<(u32, FedR
     let server = crossroads_replay::start(&c, None, shutdown.clone())
         .await
         .context("starting a replay server")?;
-    c.transport.replay_endpoint = format!("http://{}", server.local_addr());
+    c.transport.replay_endpoint = format!("{}://{}", c.transport.tls.scheme(), server.local_addr());
     let client = ReplayClient::new(&c.transport, &c.replay.table)?;
     let spec = TrainerConfig::from_config(&c.sim, &c.learner)?.spec;
     fill_replay(&client, &spec, 20_000)

@@ -125,12 +125,15 @@ pub struct Addresses {
     pub replay: SocketAddr,
     pub learner: SocketAddr,
     pub shm_prefix: String,
+    /// `https` when the run's servers speak TLS, else `http`.
+    pub scheme: &'static str,
 }
 
 impl Addresses {
     /// Free loopback ports for the replay and the learner, and iceoryx2
-    /// service names unique to this run folder and process.
-    pub fn pick(out: &Path) -> anyhow::Result<Self> {
+    /// service names unique to this run folder and process; `scheme` is
+    /// the URLs' (`transport.tls`'s).
+    pub fn pick(out: &Path, scheme: &'static str) -> anyhow::Result<Self> {
         let name = out
             .file_name()
             .map_or("run".into(), |n| n.to_string_lossy().into_owned());
@@ -142,7 +145,18 @@ impl Addresses {
             replay: free_port()?,
             learner: free_port()?,
             shm_prefix: format!("crossroads/train-{name}-{}", std::process::id()),
+            scheme,
         })
+    }
+
+    /// The replay's URL.
+    pub fn replay_url(&self) -> String {
+        format!("{}://{}", self.scheme, self.replay)
+    }
+
+    /// The learner's URL.
+    pub fn learner_url(&self) -> String {
+        format!("{}://{}", self.scheme, self.learner)
     }
 
     /// The variables every role gets (they override the file). The roles
@@ -158,7 +172,7 @@ impl Addresses {
             ("CROSSROADS_REPLAY__LISTEN".into(), self.replay.to_string()),
             (
                 "CROSSROADS_TRANSPORT__REPLAY_ENDPOINT".into(),
-                format!("http://{}", self.replay),
+                self.replay_url(),
             ),
             (
                 "CROSSROADS_LEARNER__LISTEN".into(),
@@ -166,7 +180,7 @@ impl Addresses {
             ),
             (
                 "CROSSROADS_TRANSPORT__LEARNER_ENDPOINT".into(),
-                format!("http://{}", self.learner),
+                self.learner_url(),
             ),
             (
                 "CROSSROADS_TRANSPORT__SHM_PREFIX".into(),

@@ -7,8 +7,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use crossroads_common::Shutdown;
-use crossroads_transport::LearnerClient;
 use crossroads_transport::grpc::ReplayClient;
+use crossroads_transport::{ClientSecurity, LearnerClient};
 use indicatif::ProgressBar;
 
 use super::prepare::Run;
@@ -78,7 +78,7 @@ pub async fn train(run: Run) -> anyhow::Result<()> {
 async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow::Result<()> {
     let exe = std::env::current_exe().context("finding this program")?;
     let config_path = run.out.join("config.toml");
-    let addr = Addresses::pick(&run.out)?;
+    let addr = Addresses::pick(&run.out, run.config.transport.tls.scheme())?;
     let env = addr.env();
     let logs = run.out.join("logs");
     let c = run.config.clone();
@@ -94,8 +94,9 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
         free_port()?,
     )?;
     let mut transport = c.transport.clone();
-    transport.replay_endpoint = format!("http://{}", addr.replay);
-    let replay_client = ReplayClient::new(&transport, &c.replay.table)?;
+    transport.replay_endpoint = addr.replay_url();
+    let security = ClientSecurity::load(&transport)?;
+    let replay_client = ReplayClient::with_security(&transport, &security, &c.replay.table)?;
     wait_ready(&mut replay, &shutdown, false, || async {
         replay_client
             .info()
@@ -114,11 +115,7 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
         logs.join("learner.log"),
         free_port()?,
     )?;
-    let learner_client = LearnerClient::new(
-        &format!("http://{}", addr.learner),
-        c.learner.api_token.clone(),
-        timeout,
-    )?;
+    let learner_client = LearnerClient::new(&addr.learner_url(), &security, timeout)?;
     let ready = wait_ready(&mut learner, &shutdown, true, || async {
         learner_client
             .status()
