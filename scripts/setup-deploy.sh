@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what the deployment tests (tests/it/deploy.rs) use besides Docker
 # itself: debootstrap (for the local base image), Debian's prometheus and
-# promtool, and kubectl (its built-in kustomize renders deploy/k8s); then
+# promtool, kubectl (its built-in kustomize renders deploy/k8s), and ip and
+# iptables for the fault suite's network partitions; then
 # makes the local base image (deploy/make-base.sh). Idempotent: present
 # tools and an existing base image are left alone. Without a reachable
 # Docker engine it says so and stops; the tests then fail, naming it, when
@@ -16,6 +17,9 @@ missing=()
 command -v debootstrap >/dev/null || missing+=(debootstrap)
 command -v promtool >/dev/null && command -v prometheus >/dev/null || missing+=(prometheus)
 command -v kubectl >/dev/null || missing+=(kubernetes-client)
+# The fault suite's partitions (tests/it/faults.rs): namespaces and iptables.
+command -v ip >/dev/null || missing+=(iproute2)
+command -v iptables >/dev/null || missing+=(iptables)
 if ((${#missing[@]})); then
     if [[ $(id -u) != 0 ]]; then
         say "missing ${missing[*]}; install them with apt-get (needs root)"

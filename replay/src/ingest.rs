@@ -16,6 +16,7 @@
 //! stored or rejected. At shutdown the queue is drained into the tables,
 //! whatever the rate limiter says, before the server's last snapshot.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -27,6 +28,7 @@ use crossroads_types::batch::{BatchError, RejectReason, ValidBatch};
 use crate::metrics::Transport;
 use crate::service::State;
 use crate::table::{PreparedBatch, Table, TableError};
+use crate::wal::Pending;
 
 /// How long the thread sleeps when every queue is empty.
 const IDLE: Duration = Duration::from_millis(1);
@@ -89,31 +91,67 @@ impl ShmIngest {
                         return;
                     }
                 };
-                let serve = |port: &Port, queue: &mut FairQueue, draining: bool| -> bool {
+                let send = |port: &Port, origin: u128, batch_id: u64, outcome| {
+                    let ack = shm::ShmInsertAck::new(origin, batch_id, outcome);
+                    if let Err(e) = port.acks.send_copy(ack) {
+                        tracing::warn!(error = ?e, "sending a shared-memory acknowledgement");
+                    }
+                };
+                // Acknowledgements waiting for the write-ahead log, oldest
+                // first: the thread goes on inserting meanwhile, so one
+                // fsync covers many batches (as for gRPC).
+                let acknowledge_durable = |port: &Port, waiting: &mut VecDeque<Waiting>, block: bool| {
+                    while let Some(w) = waiting.front_mut() {
+                        let durable = if block {
+                            Some(std::mem::replace(&mut w.pending, Pending::done()).wait_durable())
+                        } else {
+                            w.pending.try_durable()
+                        };
+                        let Some(durable) = durable else { break };
+                        let outcome = durable.map(|()| w.stored).map_err(|e| {
+                            state.metrics.reject(RejectReason::Unavailable);
+                            tracing::error!(table = port.table.name(), batch_id = w.batch_id, error = %e,
+                                "a shared-memory batch is in the table but not durable; not acknowledged");
+                            RejectReason::Unavailable
+                        });
+                        send(port, w.origin, w.batch_id, outcome);
+                        waiting.pop_front();
+                    }
+                };
+                let serve = |port: &Port, queue: &mut FairQueue, waiting: &mut VecDeque<Waiting>, draining: bool| -> bool {
+                    acknowledge_durable(port, waiting, false);
                     queue.take_all(&port.subscriber);
                     let Some(r) = queue.next() else {
                         return false;
                     };
-                    let outcome = handle(&state, &runtime, &port.table, r.read, draining);
-                    let ack = shm::ShmInsertAck::new(r.origin, r.batch_id, outcome);
-                    if let Err(e) = port.acks.send_copy(ack) {
-                        tracing::warn!(error = ?e, "sending a shared-memory acknowledgement");
+                    match handle(&state, &runtime, &port.table, r.read, draining) {
+                        (outcome, None) => send(port, r.origin, r.batch_id, outcome),
+                        (Ok(stored), Some(pending)) => waiting.push_back(Waiting {
+                            origin: r.origin,
+                            batch_id: r.batch_id,
+                            stored,
+                            pending,
+                        }),
+                        (Err(reason), Some(_)) => send(port, r.origin, r.batch_id, Err(reason)),
                     }
                     true
                 };
-                let mut queues: Vec<FairQueue> =
-                    subscribers.iter().map(|_| FairQueue::default()).collect();
+                let mut queues: Vec<(FairQueue, VecDeque<Waiting>)> = subscribers
+                    .iter()
+                    .map(|_| (FairQueue::default(), VecDeque::new()))
+                    .collect();
                 while !state.shutdown.is_triggered() {
                     let mut busy = false;
-                    for (port, queue) in subscribers.iter().zip(&mut queues) {
-                        busy |= serve(port, queue, false);
+                    for (port, (queue, waiting)) in subscribers.iter().zip(&mut queues) {
+                        busy |= serve(port, queue, waiting, false);
                     }
                     if !busy {
                         std::thread::sleep(IDLE);
                     }
                 }
-                for (port, queue) in subscribers.iter().zip(&mut queues) {
-                    while serve(port, queue, true) {}
+                for (port, (queue, waiting)) in subscribers.iter().zip(&mut queues) {
+                    while serve(port, queue, waiting, true) {}
+                    acknowledge_durable(port, waiting, true);
                 }
             })
             .map_err(|e| ShmError::iceoryx("starting the ingest thread", e))?;
@@ -158,7 +196,7 @@ struct Received {
 /// Received batches by publisher, served one publisher after another.
 #[derive(Default)]
 struct FairQueue {
-    by_origin: std::collections::BTreeMap<u128, std::collections::VecDeque<Received>>,
+    by_origin: std::collections::BTreeMap<u128, VecDeque<Received>>,
     last: Option<u128>,
 }
 
@@ -212,6 +250,15 @@ impl FairQueue {
     }
 }
 
+/// A stored batch whose acknowledgement waits for the write-ahead log.
+struct Waiting {
+    origin: u128,
+    batch_id: u64,
+    /// `(inserted, table size)`, acknowledged once durable.
+    stored: (u32, u64),
+    pending: Pending,
+}
+
 /// One table's shared-memory ports.
 struct Port {
     table: Arc<Table>,
@@ -229,18 +276,19 @@ struct Port {
 /// Checks the table and size of one received (validated) batch, prepares
 /// and inserts it; counts and logs
 /// rejections. Returns what to acknowledge: `(inserted, table size)` or
-/// the rejection's reason.
+/// the rejection's reason, and, with the write-ahead log on, the record to
+/// wait for before acknowledging a stored batch.
 fn handle(
     state: &State,
     runtime: &tokio::runtime::Handle,
     table: &Arc<Table>,
     read: Result<(String, u64, ValidBatch), BatchError>,
     draining: bool,
-) -> Result<(u32, u64), RejectReason> {
+) -> (Result<(u32, u64), RejectReason>, Option<Pending>) {
     let reject = |e: BatchError| {
         state.metrics.reject(e.reason);
         tracing::warn!(table = table.name(), reason = %e.reason, error = %e, "rejected a shared-memory batch");
-        Err(e.reason)
+        (Err(e.reason), None)
     };
     let (name, batch_id, batch) = match read {
         Ok(ok) => ok,
@@ -260,7 +308,7 @@ fn handle(
     if let Err(e) = state.check_durable() {
         state.metrics.reject(RejectReason::Unavailable);
         tracing::warn!(table = table.name(), batch_id, error = %e, "refused a shared-memory batch");
-        return Err(RejectReason::Unavailable);
+        return (Err(RejectReason::Unavailable), None);
     }
     let mut now = draining;
     loop {
@@ -271,18 +319,11 @@ fn handle(
         };
         match outcome {
             Ok(done) => {
-                if let Some(pending) = state.log(table, &prepared, &done)
-                    && let Err(e) = pending.wait_durable()
-                {
-                    state.metrics.reject(RejectReason::Unavailable);
-                    tracing::error!(table = table.name(), batch_id, error = %e,
-                        "a shared-memory batch is in the table but not durable; not acknowledged");
-                    return Err(RejectReason::Unavailable);
-                }
                 table
                     .metrics()
                     .inserted(Transport::Shm, u64::from(done.inserted));
-                return Ok((done.inserted, done.size));
+                let pending = state.log(table, &prepared, &done);
+                return (Ok((done.inserted, done.size)), pending);
             }
             // Keep the batch and keep waiting: the full queue pushes back on
             // the publishers meanwhile.
@@ -292,7 +333,7 @@ fn handle(
             Err(TableError::Invalid(e)) => return reject(e),
             Err(e) => {
                 tracing::error!(table = table.name(), batch_id, error = %e, "inserting a shared-memory batch");
-                return Err(RejectReason::BadRequest);
+                return (Err(RejectReason::BadRequest), None);
             }
         }
     }

@@ -376,6 +376,23 @@ impl Pending {
     pub fn wait_durable(self) -> Result<(), WalError> {
         self.0.blocking_recv().unwrap_or(Err(WalError::Stopped))
     }
+
+    /// The answer if it has come, without waiting.
+    pub fn try_durable(&mut self) -> Option<Result<(), WalError>> {
+        use tokio::sync::oneshot::error::TryRecvError;
+        match self.0.try_recv() {
+            Ok(result) => Some(result),
+            Err(TryRecvError::Empty) => None,
+            Err(TryRecvError::Closed) => Some(Err(WalError::Stopped)),
+        }
+    }
+
+    /// An answer already given: durable.
+    pub fn done() -> Self {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let _ = tx.send(Ok(()));
+        Self(rx)
+    }
 }
 
 /// The log of one server: the writer thread and what inserts need of it.

@@ -203,7 +203,12 @@ fn the_replay_killed_at_random_moments_loses_no_acknowledged_transition() {
 }
 
 fn learner_client(addr: &str) -> LearnerClient {
-    LearnerClient::new(&format!("http://{addr}"), None, Duration::from_secs(10)).expect("client")
+    LearnerClient::new(
+        &format!("http://{addr}"),
+        &crossroads_transport::security::ClientSecurity::none(),
+        Duration::from_secs(10),
+    )
+    .expect("client")
 }
 
 #[test]

@@ -18,6 +18,7 @@ use crossroads_config::Config;
 use crossroads_replay::bench::SyntheticEpisodes;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_transport::learner_client::LearnerClient;
+use crossroads_transport::security::ClientSecurity;
 use crossroads_transport::shm::ShmBatchPublisher;
 use crossroads_types::{TransitionBatch, ValidBatch};
 use serde::Serialize;
@@ -225,6 +226,15 @@ fn quantile_ms(sorted_us: &[u32], q: f64) -> f64 {
     f64::from(sorted_us[i]) / 1000.0
 }
 
+/// The run's config without TLS and tokens: the load is measured on plain
+/// loopback gRPC.
+fn plain(config: &Config) -> Config {
+    let mut c = config.clone();
+    c.transport.tls = Default::default();
+    c.transport.auth = Default::default();
+    c
+}
+
 /// Realistic batches (synthetic TTG episodes), made before the clock runs.
 fn batches(n: usize, size: usize) -> Vec<TransitionBatch> {
     let mut episodes = SyntheticEpisodes::new(7);
@@ -233,7 +243,7 @@ fn batches(n: usize, size: usize) -> Vec<TransitionBatch> {
 
 async fn replay_load(config: &Config, o: &Options, wal: bool) -> anyhow::Result<ReplayLoad> {
     let dir = tempfile::tempdir().context("a temporary folder for the log")?;
-    let mut c = config.clone();
+    let mut c = plain(config);
     c.replay.listen = ([127, 0, 0, 1], 0).into();
     c.replay.capacity = o.capacity;
     c.replay.samples_per_insert = 0.0;
@@ -383,7 +393,7 @@ fn shm_publisher(
 }
 
 async fn weights_load(config: &Config, o: &Options) -> anyhow::Result<WeightsLoad> {
-    let mut c = config.clone();
+    let mut c = plain(config);
     c.replay.listen = ([127, 0, 0, 1], 0).into();
     c.replay.snapshot_dir = None;
     c.replay.shm_ingest = false;
@@ -409,11 +419,11 @@ async fn weights_load(config: &Config, o: &Options) -> anyhow::Result<WeightsLoa
     let url = format!("http://{}", learner.local_addr());
     let deadline = Instant::now() + Duration::from_secs_f64(o.seconds);
     // The stalled subscriber: subscribed, never reads.
-    let stalled = LearnerClient::new(&url, None, Duration::from_secs(30))?;
+    let stalled = LearnerClient::new(&url, &ClientSecurity::none(), Duration::from_secs(30))?;
     let _stalled_stream = stalled.subscribe_weights(0).await?;
     let mut live = Vec::new();
     for _ in 1..o.subscribers {
-        let client = LearnerClient::new(&url, None, Duration::from_secs(30))?;
+        let client = LearnerClient::new(&url, &ClientSecurity::none(), Duration::from_secs(30))?;
         live.push(tokio::spawn(async move {
             let mut stream = client.subscribe_weights(0).await?;
             let (mut first, mut last, mut got, mut bytes) = (None, 0u64, 0u64, 0usize);
@@ -440,7 +450,7 @@ async fn weights_load(config: &Config, o: &Options) -> anyhow::Result<WeightsLoa
         max_gaps = max_gaps.max((last - first + 1).saturating_sub(got));
         bytes = bytes.max(b);
     }
-    let published = LearnerClient::new(&url, None, Duration::from_secs(30))?
+    let published = LearnerClient::new(&url, &ClientSecurity::none(), Duration::from_secs(30))?
         .status()
         .await?
         .weights_version;
