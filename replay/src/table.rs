@@ -499,9 +499,11 @@ impl Table {
 
     /// Replaces the content by `image` (restoring a snapshot). When the
     /// image holds more items than the capacity, the oldest are dropped;
-    /// returns how many. An image that does not hold together (columns of
-    /// different lengths, observations out of range, bad priorities) is
-    /// refused with nothing changed.
+    /// returns how many. An image whose items a valid batch could not have
+    /// put there (columns of different lengths, no or an invalid spec, an
+    /// action, reward, discount or priority a batch may not have,
+    /// observations out of range or not decoding to the spec's length) is
+    /// refused with nothing changed: samples are not checked again.
     ///
     /// - Blocks: no; the new content is built without the lock and swapped
     ///   in.
@@ -511,30 +513,8 @@ impl Table {
     ///   seed and the gauges; wakes every waiting insert and sample.
     pub fn restore(&self, image: &TableImage) -> Result<usize, BatchError> {
         let n = image.len();
-        if image.items.check_lengths().is_err() || image.next_key < n as u64 {
-            return Err(BatchError::new(
-                RejectReason::LengthMismatch,
-                "items",
-                "columns of different lengths",
-            ));
-        }
+        let obs_len = check_image(image)?;
         let n_obs = image.observation_offsets.len();
-        for (i, (o, no)) in image
-            .items
-            .observation_index
-            .iter()
-            .zip(&image.items.next_observation_index)
-            .enumerate()
-        {
-            if *o as usize >= n_obs || *no as usize >= n_obs {
-                return Err(BatchError::new(
-                    RejectReason::IndexRange,
-                    format!("items[{i}].observation"),
-                    format!("refers to observation {} of {n_obs}", (*o).max(*no)),
-                ));
-            }
-        }
-        check_priorities(&image.items.priorities, |i| format!("items[{i}].priority"))?;
         let keep = n.min(self.config.capacity);
         let skip = n - keep;
         let oldest = image.next_key - n as u64 + skip as u64;
@@ -542,6 +522,7 @@ impl Table {
         fresh.spec = image.spec.clone();
         fresh.next_key = oldest;
         let mut ids = Interned::new(n_obs);
+        let mut scratch = Vec::new();
         for i in skip..n {
             let Some(mut t) = image.items.get(i) else {
                 break;
@@ -553,6 +534,15 @@ impl Table {
                             RejectReason::ObservationEncoding,
                             format!("observations[{o}]"),
                             "out of the data",
+                        )
+                    })?;
+                    // Samples decode it later without a check of their own.
+                    scratch.clear();
+                    compact::to_sparse_wire(bytes, obs_len, &mut scratch).map_err(|e| {
+                        BatchError::new(
+                            RejectReason::ObservationEncoding,
+                            format!("observations[{o}]"),
+                            e.to_string(),
                         )
                     })?;
                     Ok((bytes, content_hash(bytes)))
@@ -640,6 +630,83 @@ impl Table {
             }
         }
     }
+}
+
+/// Checks what a snapshot's image says of its items, as
+/// [`TransitionBatch::validate`] checks a batch's: returns the length of
+/// an observation (each is checked as it is stored).
+fn check_image(image: &TableImage) -> Result<usize, BatchError> {
+    let c = &image.items;
+    let n = c.len();
+    if c.check_lengths().is_err() || image.next_key < n as u64 {
+        return Err(BatchError::new(
+            RejectReason::LengthMismatch,
+            "items",
+            "columns of different lengths",
+        ));
+    }
+    let Some((spec, num_actions)) = &image.spec else {
+        if n == 0 {
+            return Ok(0);
+        }
+        return Err(BatchError::new(
+            RejectReason::Spec,
+            "spec",
+            format!("{n} items without a spec"),
+        ));
+    };
+    let obs_len = spec
+        .num_values()
+        .filter(|_| !spec.kind.is_empty() && *num_actions > 0)
+        .ok_or_else(|| {
+            BatchError::new(
+                RejectReason::Spec,
+                "spec",
+                format!("{spec} with {num_actions} actions is not a valid spec"),
+            )
+        })?;
+    // One transition at a time, through the batch check.
+    let mut one = TransitionBatch::new(spec.clone(), *num_actions, ObservationEncoding::SparseF32);
+    one.push_observation(&[]);
+    one.push(Transition {
+        observation: 0,
+        action: 0,
+        reward: 0.0,
+        discount: 0.0,
+        priority: 0.0,
+        next_observation: 0,
+    });
+    for i in 0..n {
+        let Some(t) = c.get(i) else { break };
+        one.columns.set(
+            0,
+            Transition {
+                observation: 0,
+                next_observation: 0,
+                ..t
+            },
+        );
+        one.validate().map_err(|e| {
+            let field = e.field.replacen("[0]", &format!("[{i}]"), 1);
+            BatchError::new(e.reason, format!("items.{field}"), e.problem)
+        })?;
+    }
+    let n_obs = image.observation_offsets.len();
+    for (i, (o, no)) in c
+        .observation_index
+        .iter()
+        .zip(&c.next_observation_index)
+        .enumerate()
+    {
+        if *o as usize >= n_obs || *no as usize >= n_obs {
+            return Err(BatchError::new(
+                RejectReason::IndexRange,
+                format!("items[{i}].observation"),
+                format!("refers to observation {} of {n_obs}", (*o).max(*no)),
+            ));
+        }
+    }
+    Ok(obs_len)
 }
 
 /// What a sample copied out under the lock; finished into a [`Sample`]
