@@ -501,7 +501,8 @@ impl Table {
     /// image holds more items than the capacity, the oldest are dropped;
     /// returns how many. An image whose items a valid batch could not have
     /// put there (columns of different lengths, no or an invalid spec, an
-    /// action, reward, discount or priority a batch may not have,
+    /// action, reward, discount or priority a batch may not have, fewer
+    /// inserts counted than items held,
     /// observations out of range or not decoding to the spec's length) is
     /// refused with nothing changed: samples are not checked again.
     ///
@@ -643,6 +644,14 @@ fn check_image(image: &TableImage) -> Result<usize, BatchError> {
             RejectReason::LengthMismatch,
             "items",
             "columns of different lengths",
+        ));
+    }
+    // The rate limiter's count: a table never holds more than it took in.
+    if image.inserts_total < n as u64 {
+        return Err(BatchError::new(
+            RejectReason::BadRequest,
+            "inserts_total",
+            format!("{} inserts for {n} items held", image.inserts_total),
         ));
     }
     let Some((spec, num_actions)) = &image.spec else {

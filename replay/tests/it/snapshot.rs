@@ -210,16 +210,19 @@ async fn keeps_only_the_newest_snapshots() {
 }
 
 /// A snapshot whose checksums hold but whose items a valid batch could not
-/// have stored (the `snapshot` fuzz target's property: every sample of a
-/// restored table is a valid batch) is refused, and the table keeps what
-/// it held. Before, `restore` checked only lengths, indices and
+/// have stored, or whose insert count is below the items it holds (the
+/// `snapshot` fuzz target's property: a restored table samples, and every
+/// sample is a valid batch) is refused, and the table keeps what it held. Before, `restore` checked only lengths, indices and
 /// priorities, and such items reached the learner in samples.
 #[tokio::test]
 async fn an_image_no_valid_batch_could_make_is_refused_with_nothing_changed() {
     let t = filled().await;
     let good = t.image();
-    let spoil: [(&str, fn(&mut TableImage)); 6] = [
+    let spoil: [(&str, fn(&mut TableImage)); 7] = [
         ("action", |i| i.items.actions[3] = 99),
+        // Found by the fuzz target: the limiter then never let a sample
+        // through (fewer inserts than the minimum size).
+        ("inserts", |i| i.inserts_total = 0),
         ("reward", |i| i.items.rewards[0] = f32::NAN),
         ("discount", |i| i.items.discounts[1] = 1.5),
         ("spec", |i| i.spec = None),
