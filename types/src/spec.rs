@@ -190,7 +190,7 @@ impl NetworkSpec {
             .checked_mul(o.rows)
             .and_then(|grid| grid.checked_mul(o.cols))
             .and_then(|grid| grid.checked_add(o.extra));
-        if !len.is_some_and(|len| len <= MAX_OBSERVATION_LEN as i64) {
+        if len.is_none_or(|len| len > MAX_OBSERVATION_LEN as i64) {
             return Err(SpecError::Invalid(format!(
                 "an observation must have at most {MAX_OBSERVATION_LEN} values: {o:?}"
             )));

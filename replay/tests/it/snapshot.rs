@@ -218,7 +218,8 @@ async fn keeps_only_the_newest_snapshots() {
 async fn an_image_no_valid_batch_could_make_is_refused_with_nothing_changed() {
     let t = filled().await;
     let good = t.image();
-    let spoil: [(&str, fn(&mut TableImage)); 7] = [
+    type Spoil = fn(&mut TableImage);
+    let spoil: [(&str, Spoil); 7] = [
         ("action", |i| i.items.actions[3] = 99),
         // Found by the fuzz target: the limiter then never let a sample
         // through (fewer inserts than the minimum size).
