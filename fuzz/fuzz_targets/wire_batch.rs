@@ -59,11 +59,11 @@ fuzz_target!(|data: &[u8]| {
             Err(e) => assert!(!e.field.is_empty(), "an error names its field"),
         }
     }
-    if let Ok(response) = pb::SampleResponse::decode(data) {
-        if let Ok(sample) = wire::sample_from_wire(response) {
-            check_invariants(&sample.batch);
-            assert_eq!(sample.keys.len(), sample.batch.len());
-            assert_eq!(sample.weights.len(), sample.batch.len());
-        }
+    if let Ok(response) = pb::SampleResponse::decode(data)
+        && let Ok(sample) = wire::sample_from_wire(response)
+    {
+        check_invariants(&sample.batch);
+        assert_eq!(sample.keys.len(), sample.batch.len());
+        assert_eq!(sample.weights.len(), sample.batch.len());
     }
 });

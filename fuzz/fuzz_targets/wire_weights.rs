@@ -49,9 +49,9 @@ fuzz_target!(|data: &[u8]| {
             );
             assert_eq!(convert::weights_from_wire(back), Ok(w));
         }
-    } else if let Ok(message) = pb::NetworkSpec::decode(data) {
-        if let Ok(spec) = convert::spec_from_wire(message) {
-            check_spec(&spec);
-        }
+    } else if let Ok(message) = pb::NetworkSpec::decode(data)
+        && let Ok(spec) = convert::spec_from_wire(message)
+    {
+        check_spec(&spec);
     }
 });

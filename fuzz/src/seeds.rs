@@ -269,7 +269,7 @@ fn compact_observation() -> Vec<Seed> {
         compact_bytes,
     ]
     .concat();
-    let encode = [vec![1, 3, 0], dense].concat();
+    let encode = [vec![1, 3], dense].concat();
     vec![
         ("compact_observation", "decode".into(), decode),
         ("compact_observation", "encode".into(), encode),
