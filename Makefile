@@ -6,7 +6,7 @@
 CARGO ?= cargo
 RUN_ARGS ?=
 
-.PHONY: all setup pydeps deploydeps build run test faults lint fmt clean-libtorch bench-learner sumo-check
+.PHONY: all setup pydeps deploydeps build run test faults lint fmt fuzz clean-libtorch bench-learner sumo-check
 
 all: build
 
@@ -33,15 +33,25 @@ deploydeps:
 	@scripts/setup-deploy.sh
 
 # Every test: the slow trainings too (CROSSROADS_SLOW_TESTS=1), and those
-# that need Python, Docker, SUMO or (as root) a tmpfs mount (ignored by
-# plain `cargo test`), which fail here when their tool is missing
-# (CROSSROADS_REQUIRE_*=1).
+# that need Python, Docker, SUMO or (as root) a tmpfs mount and network
+# namespaces (ignored by plain `cargo test`), which fail here when their
+# tool is missing (CROSSROADS_REQUIRE_*=1); then each fuzz target
+# FUZZ_SMOKE_SECONDS over its corpus.
+FUZZ_SMOKE_SECONDS ?= 20
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
 	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 \
 	CROSSROADS_REQUIRE_MOUNT=$$([ "$$(id -u)" = 0 ] && echo 1) \
 	$(CARGO) test --workspace --all-targets --no-fail-fast -- --include-ignored
 	$(CARGO) test --workspace --doc
+	@scripts/fuzz.sh $(FUZZ_SMOKE_SECONDS)
+
+# Each fuzz target FUZZ_SECONDS over its corpus (installs cargo-fuzz);
+# `make fuzz FUZZ_SECONDS=3600` for a long run, scripts/fuzz.sh SECONDS
+# TARGET for one target.
+FUZZ_SECONDS ?= 600
+fuzz:
+	@scripts/fuzz.sh $(FUZZ_SECONDS)
 
 lint: setup
 	$(CARGO) fmt --all -- --check

@@ -28,23 +28,14 @@ use crossroads_model::NetworkSpec;
 use crossroads_transport::convert::CheckpointSummary;
 use crossroads_types::checkpoint::check_checkpoint_id;
 use parking_lot::Mutex;
-use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
 use crate::trainer::TrainerState;
 
-/// File names inside a checkpoint.
-pub const WEIGHTS_FILE: &str = "weights.safetensors";
-/// The target network.
-pub const TARGET_FILE: &str = "target.safetensors";
-/// The optimizer state.
-pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
-/// The manifest, written last.
-pub const MANIFEST_FILE: &str = "manifest.json";
-/// Value of the manifest's `format`.
-pub const MANIFEST_FORMAT: &str = "crossroads.checkpoint";
-/// Version of the checkpoint layout.
-pub const MANIFEST_VERSION: u32 = 1;
+pub use crossroads_types::checkpoint::{
+    FileEntry, MANIFEST_FILE, MANIFEST_FORMAT, MANIFEST_VERSION, Manifest, OPTIMIZER_FILE,
+    TARGET_FILE, WEIGHTS_FILE,
+};
 
 const TMP_PREFIX: &str = ".tmp-";
 /// The file of the version lease: the highest weights version a learner
@@ -92,48 +83,6 @@ fn io<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -
         path: path.to_path_buf(),
         source,
     }
-}
-
-/// Size and checksum of one file, as the manifest records it.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct FileEntry {
-    /// Bytes.
-    pub bytes: u64,
-    /// CRC-32 (IEEE) of the content.
-    pub crc32: u32,
-}
-
-/// `manifest.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Manifest {
-    /// [`MANIFEST_FORMAT`].
-    pub format: String,
-    /// [`MANIFEST_VERSION`].
-    pub format_version: u32,
-    /// The checkpoint's id (its folder name).
-    pub id: String,
-    /// Updates applied when it was taken.
-    pub update_step: u64,
-    /// Latest published weights version when it was taken.
-    pub weights_version: u64,
-    /// When it was written, Unix milliseconds.
-    pub created_unix_ms: i64,
-    /// Scenario of the run.
-    pub scenario: String,
-    /// The network.
-    pub network: NetworkSpec,
-    /// `rmsprop` or `adam`.
-    pub optimizer: String,
-    /// Latest evaluation reported (metric -> value) and the version it
-    /// evaluated.
-    pub eval_metrics: BTreeMap<String, f64>,
-    /// Weights version the evaluation was of; 0 if none.
-    pub eval_weights_version: u64,
-    /// The run's configuration as TOML (it holds no secret: the token lives
-    /// in a file or the environment).
-    pub config: String,
-    /// The other files with their size and checksum.
-    pub files: BTreeMap<String, FileEntry>,
 }
 
 /// A checkpoint as listed: its manifest, total size and whether it is the
@@ -240,20 +189,13 @@ fn write_synced(path: &Path, bytes: &[u8]) -> Result<FileEntry, StoreError> {
     let mut f = File::create(path).map_err(io("creating", path))?;
     f.write_all(bytes).map_err(io("writing", path))?;
     f.sync_all().map_err(io("syncing", path))?;
-    Ok(FileEntry {
-        bytes: bytes.len() as u64,
-        crc32: crc32(bytes),
-    })
+    Ok(FileEntry::of(bytes))
 }
 
 fn sync_dir(path: &Path) -> Result<(), StoreError> {
     File::open(path)
         .and_then(|d| d.sync_all())
         .map_err(io("syncing folder", path))
-}
-
-fn crc32(bytes: &[u8]) -> u32 {
-    crc32fast::hash(bytes)
 }
 
 impl CheckpointStore {
@@ -347,26 +289,10 @@ impl CheckpointStore {
     fn read_manifest(&self, id: &str) -> Result<Manifest, StoreError> {
         let path = self.resolve(id)?.join(MANIFEST_FILE);
         let text = fs::read_to_string(&path).map_err(io("reading", &path))?;
-        let m: Manifest = serde_json::from_str(&text).map_err(|e| StoreError::Corrupt {
+        Manifest::parse(id, &text).map_err(|problem| StoreError::Corrupt {
             id: id.to_owned(),
-            problem: format!("{MANIFEST_FILE}: {e}"),
-        })?;
-        if m.format != MANIFEST_FORMAT || m.format_version != MANIFEST_VERSION {
-            return Err(StoreError::Corrupt {
-                id: id.to_owned(),
-                problem: format!(
-                    "format {:?} version {}; this build reads {MANIFEST_FORMAT:?} version {MANIFEST_VERSION}",
-                    m.format, m.format_version
-                ),
-            });
-        }
-        if m.id != id {
-            return Err(StoreError::Corrupt {
-                id: id.to_owned(),
-                problem: format!("its manifest names {:?}", m.id),
-            });
-        }
-        Ok(m)
+            problem,
+        })
     }
 
     fn entries_unlocked(&self) -> Result<Vec<CheckpointEntry>, StoreError> {
@@ -549,42 +475,38 @@ impl CheckpointStore {
             problem,
         };
         let read = |name: &str| -> Result<Vec<u8>, StoreError> {
-            let entry = manifest
-                .files
-                .get(name)
-                .ok_or_else(|| corrupt(format!("the manifest does not list {name}")))?;
-            let path = dir.join(name);
-            let bytes = fs::read(&path).map_err(io("reading", &path))?;
-            if bytes.len() as u64 != entry.bytes || crc32(&bytes) != entry.crc32 {
-                return Err(corrupt(format!(
-                    "{name} does not match its manifest (size or checksum)"
-                )));
+            if !manifest.files.contains_key(name) {
+                return Err(corrupt(format!("the manifest does not list {name}")));
             }
-            Ok(bytes)
+            let path = dir.join(name);
+            fs::read(&path).map_err(io("reading", &path))
         };
-        let online = read(WEIGHTS_FILE)?;
-        let target = read(TARGET_FILE)?;
-        let optimizer = read(OPTIMIZER_FILE)?;
-        let (meta, tensors) = crossroads_model::weights::decode(&optimizer)
-            .map_err(|e| corrupt(format!("{OPTIMIZER_FILE}: {e}")))?;
-        if meta.get("optimizer") != Some(&manifest.optimizer) {
-            return Err(corrupt(format!(
-                "{OPTIMIZER_FILE} holds {:?} state, the manifest says {:?}",
-                meta.get("optimizer"),
-                manifest.optimizer
-            )));
-        }
-        let optimizer_steps = meta
-            .get("steps")
-            .and_then(|s| s.parse::<u64>().ok())
-            .ok_or_else(|| corrupt(format!("{OPTIMIZER_FILE}: no step count")))?;
-        let tensors: Vec<(String, Tensor)> = tensors;
+        let (online, target, optimizer) = (
+            read(WEIGHTS_FILE)?,
+            read(TARGET_FILE)?,
+            read(OPTIMIZER_FILE)?,
+        );
+        // Every check of the bytes is tch-free (and fuzzed); what is left
+        // is making tensors of checked values.
+        let files = manifest
+            .check_files(online, target, &optimizer)
+            .map_err(corrupt)?;
+        let optimizer = files
+            .optimizer
+            .into_iter()
+            .map(|t| {
+                let name = t.name.clone();
+                crossroads_model::weights::to_tensor(t)
+                    .map(|tensor| (name, tensor))
+                    .map_err(|e| corrupt(format!("{OPTIMIZER_FILE}: {e}")))
+            })
+            .collect::<Result<Vec<(String, Tensor)>, _>>()?;
         Ok(Loaded {
             state: TrainerState {
-                online,
-                target,
-                optimizer: tensors,
-                optimizer_steps,
+                online: files.online,
+                target: files.target,
+                optimizer,
+                optimizer_steps: files.optimizer_steps,
                 step: manifest.update_step,
             },
             manifest,

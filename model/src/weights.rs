@@ -15,7 +15,8 @@
 
 use std::collections::{BTreeSet, HashMap};
 
-use safetensors::tensor::{Dtype, SafeTensors, TensorView};
+use crossroads_types::tensors::{self, F32Tensor};
+use safetensors::tensor::{Dtype, TensorView};
 use tch::{Kind, Tensor};
 
 use crate::ModelError;
@@ -51,34 +52,26 @@ pub fn encode(
         .map_err(|e| ModelError::Format(e.to_string()))
 }
 
-/// Parses safetensors bytes: the metadata and every tensor (f32 only), in
-/// the file's order.
+/// Parses safetensors bytes: the metadata and every tensor (f32 only),
+/// sorted by name. Every check of the bytes is
+/// `crossroads_types::tensors::read_f32`'s (tch-free, fuzzed); this only
+/// makes tensors of what it returns.
 #[allow(clippy::type_complexity)]
 pub fn decode(
     bytes: &[u8],
 ) -> Result<(HashMap<String, String>, Vec<(String, Tensor)>), ModelError> {
-    let (_, header) = SafeTensors::read_metadata(bytes)
-        .map_err(|e| ModelError::Format(format!("not a safetensors file: {e}")))?;
-    let metadata = header.metadata().clone().unwrap_or_default();
-    let file = SafeTensors::deserialize(bytes)
-        .map_err(|e| ModelError::Format(format!("not a safetensors file: {e}")))?;
-    let mut out = Vec::new();
-    for (name, view) in file.tensors() {
-        if view.dtype() != Dtype::F32 {
-            return Err(ModelError::Format(format!(
-                "tensor {name} is {:?}; expected F32",
-                view.dtype()
-            )));
-        }
-        let values: Vec<f32> = view
-            .data()
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect();
-        let shape: Vec<i64> = view.shape().iter().map(|&d| d as i64).collect();
-        out.push((name, Tensor::from_slice(&values).reshape(shape)));
-    }
-    Ok((metadata, out))
+    let (metadata, tensors) =
+        tensors::read_f32(bytes).map_err(|e| ModelError::Format(e.to_string()))?;
+    let tensors = tensors
+        .into_iter()
+        .map(|t| Ok((t.name.clone(), to_tensor(t)?)))
+        .collect::<Result<_, ModelError>>()?;
+    Ok((metadata, tensors))
+}
+
+/// A checked f32 tensor as a tch tensor of its shape.
+pub fn to_tensor(t: F32Tensor) -> Result<Tensor, ModelError> {
+    Ok(Tensor::from_slice(&t.values).f_reshape(t.shape)?)
 }
 
 /// Copies `tensors` into `vars` (name -> variable): every variable must be

@@ -6,6 +6,10 @@
 //! [`v1::replay_server::Replay`] service and `learner.proto` the
 //! [`v1::learner_server::Learner`] service. This is the only crate with prost
 //! types; every other crate converts them into its own types at its boundary.
+//! Every service and client uses [`codec::Codec`], under which bytes that
+//! do not decode as the expected message answer INVALID_ARGUMENT.
+
+pub mod codec;
 
 /// Messages and services of package `crossroads.v1`.
 pub mod v1 {

@@ -180,12 +180,22 @@ pub fn to_sparse_wire(bytes: &[u8], len: usize, out: &mut Vec<u8>) -> Result<(),
         let p = dict_at + 4 * r;
         [bytes[p], bytes[p + 1], bytes[p + 2], bytes[p + 3]]
     };
+    // The table stores only finite values; anything else is corruption.
+    if let Some(r) = (0..n_values).find(|r| !f32::from_le_bytes(value(*r)).is_finite()) {
+        return Err(err(dict_at + 4 * r));
+    }
     let width = ref_width(n_values);
     let n_cells = get_varint(bytes, &mut at).ok_or(err(at))?;
     let mut previous: i64 = -1;
     for _ in 0..n_cells {
         let delta = get_varint(bytes, &mut at).ok_or(err(at))?;
-        let cell = previous + 1 + i64::try_from(delta).map_err(|_| err(at))?;
+        // Checked: a corrupt delta must not overflow (a cell beyond the
+        // observation is an error below anyway).
+        let cell = i64::try_from(delta)
+            .ok()
+            .and_then(|d| (previous + 1).checked_add(d))
+            .filter(|cell| *cell < len as i64)
+            .ok_or(err(at))?;
         previous = cell;
         let mask = if channels > 1 {
             let m = *bytes.get(at).ok_or(err(at))?;
@@ -198,7 +208,10 @@ pub fn to_sparse_wire(bytes: &[u8], len: usize, out: &mut Vec<u8>) -> Result<(),
             if mask & (1 << ch) == 0 {
                 continue;
             }
-            let index = cell * i64::from(channels) + i64::from(ch);
+            let index = cell
+                .checked_mul(i64::from(channels))
+                .and_then(|i| i.checked_add(i64::from(ch)))
+                .unwrap_or(i64::MAX);
             if index >= len as i64 {
                 return Err(err(at));
             }
@@ -276,5 +289,31 @@ mod tests {
         for cut in 0..compact.len() {
             assert!(to_sparse_wire(&compact[..cut], 6, &mut Vec::new()).is_err());
         }
+    }
+
+    /// A cell delta near 2^63 after a first cell overflowed the cell
+    /// number (a panic in debug builds), and a NaN in the dictionary came
+    /// out as a sample's value; both are corruption of a snapshot.
+    #[test]
+    fn overflowing_deltas_and_non_finite_values_are_errors() {
+        let mut bytes = vec![1, 1];
+        bytes.extend_from_slice(&2.0f32.to_le_bytes());
+        bytes.push(2);
+        bytes.extend_from_slice(&[0, 0]);
+        let mut huge = Vec::new();
+        put_varint(&mut huge, i64::MAX as u64);
+        bytes.extend_from_slice(&huge);
+        bytes.push(0);
+        assert_eq!(
+            to_sparse_wire(&bytes, 6, &mut Vec::new()),
+            Err(CompactError { at: 9 + huge.len() })
+        );
+
+        let mut nan = Vec::new();
+        encode_pairs(&[(1, f32::NAN)], 1, &mut Vec::new(), &mut nan);
+        assert_eq!(
+            to_sparse_wire(&nan, 6, &mut Vec::new()),
+            Err(CompactError { at: 2 })
+        );
     }
 }

@@ -170,7 +170,7 @@ impl PreparedBatch {
     /// its first key; an image that does not hold together, or has no
     /// spec, is refused.
     pub fn from_image(image: TableImage) -> Result<(u64, Self), BatchError> {
-        image.check()?;
+        let obs_len = check_image(&image)?;
         let Some((spec, num_actions)) = image.spec.clone() else {
             return Err(BatchError::new(
                 RejectReason::BadRequest,
@@ -180,15 +180,23 @@ impl PreparedBatch {
         };
         let n_obs = image.observation_offsets.len();
         let mut entries = Vec::with_capacity(n_obs);
+        let mut scratch = Vec::new();
         for i in 0..n_obs {
             let start = image.observation_offsets[i] as usize;
-            let bytes = image.observation(i).ok_or_else(|| {
+            let bad = |problem: String| {
                 BatchError::new(
                     RejectReason::ObservationEncoding,
                     format!("observations[{i}]"),
-                    "out of the data",
+                    problem,
                 )
-            })?;
+            };
+            let bytes = image
+                .observation(i)
+                .ok_or_else(|| bad("out of the data".to_owned()))?;
+            // Samples decode it later without a check of their own.
+            scratch.clear();
+            compact::to_sparse_wire(bytes, obs_len, &mut scratch)
+                .map_err(|e| bad(e.to_string()))?;
             entries.push((content_hash(bytes), start, start + bytes.len()));
         }
         let first_key = image.next_key - image.len() as u64;
@@ -297,36 +305,6 @@ impl TableImage {
     /// Whether it holds no item.
     pub fn is_empty(&self) -> bool {
         self.items.is_empty()
-    }
-
-    /// Whether the image holds together: columns of one length, keys that
-    /// fit, observations in range, priorities finite and not negative.
-    fn check(&self) -> Result<(), BatchError> {
-        let n = self.len();
-        if self.items.check_lengths().is_err() || self.next_key < n as u64 {
-            return Err(BatchError::new(
-                RejectReason::LengthMismatch,
-                "items",
-                "columns of different lengths",
-            ));
-        }
-        let n_obs = self.observation_offsets.len();
-        for (i, (o, no)) in self
-            .items
-            .observation_index
-            .iter()
-            .zip(&self.items.next_observation_index)
-            .enumerate()
-        {
-            if *o as usize >= n_obs || *no as usize >= n_obs {
-                return Err(BatchError::new(
-                    RejectReason::IndexRange,
-                    format!("items[{i}].observation"),
-                    format!("refers to observation {} of {n_obs}", (*o).max(*no)),
-                ));
-            }
-        }
-        check_priorities(&self.items.priorities, |i| format!("items[{i}].priority"))
     }
 
     fn observation(&self, i: usize) -> Option<&[u8]> {
@@ -580,9 +558,12 @@ impl Table {
 
     /// Replaces the content by `image` (restoring a snapshot). When the
     /// image holds more items than the capacity, the oldest are dropped;
-    /// returns how many. An image that does not hold together (columns of
-    /// different lengths, observations out of range, bad priorities) is
-    /// refused with nothing changed.
+    /// returns how many. An image whose items a valid batch could not have
+    /// put there (columns of different lengths, no or an invalid spec, an
+    /// action, reward, discount or priority a batch may not have, fewer
+    /// inserts counted than items held,
+    /// observations out of range or not decoding to the spec's length) is
+    /// refused with nothing changed: samples are not checked again.
     ///
     /// - Blocks: no; the new content is built without the lock and swapped
     ///   in.
@@ -591,8 +572,16 @@ impl Table {
     ///   limiter's counts (its waits start again from zero), the sampler's
     ///   seed and the gauges; wakes every waiting insert and sample.
     pub fn restore(&self, image: &TableImage) -> Result<usize, BatchError> {
-        image.check()?;
+        let obs_len = check_image(image)?;
         let n = image.len();
+        // The rate limiter's count: a table never holds more than it took in.
+        if image.inserts_total < n as u64 {
+            return Err(BatchError::new(
+                RejectReason::BadRequest,
+                "inserts_total",
+                format!("{} inserts for {n} items held", image.inserts_total),
+            ));
+        }
         let n_obs = image.observation_offsets.len();
         let keep = n.min(self.config.capacity);
         let skip = n - keep;
@@ -601,6 +590,7 @@ impl Table {
         fresh.spec = image.spec.clone();
         fresh.next_key = oldest;
         let mut ids = Interned::new(n_obs);
+        let mut scratch = Vec::new();
         for i in skip..n {
             let Some(mut t) = image.items.get(i) else {
                 break;
@@ -612,6 +602,15 @@ impl Table {
                             RejectReason::ObservationEncoding,
                             format!("observations[{o}]"),
                             "out of the data",
+                        )
+                    })?;
+                    // Samples decode it later without a check of their own.
+                    scratch.clear();
+                    compact::to_sparse_wire(bytes, obs_len, &mut scratch).map_err(|e| {
+                        BatchError::new(
+                            RejectReason::ObservationEncoding,
+                            format!("observations[{o}]"),
+                            e.to_string(),
                         )
                     })?;
                     Ok((bytes, content_hash(bytes)))
@@ -699,6 +698,83 @@ impl Table {
             }
         }
     }
+}
+
+/// Checks what a snapshot's image says of its items, as
+/// [`TransitionBatch::validate`] checks a batch's: returns the length of
+/// an observation (each is checked as it is stored).
+fn check_image(image: &TableImage) -> Result<usize, BatchError> {
+    let c = &image.items;
+    let n = c.len();
+    if c.check_lengths().is_err() || image.next_key < n as u64 {
+        return Err(BatchError::new(
+            RejectReason::LengthMismatch,
+            "items",
+            "columns of different lengths",
+        ));
+    }
+    let Some((spec, num_actions)) = &image.spec else {
+        if n == 0 {
+            return Ok(0);
+        }
+        return Err(BatchError::new(
+            RejectReason::Spec,
+            "spec",
+            format!("{n} items without a spec"),
+        ));
+    };
+    let obs_len = spec
+        .num_values()
+        .filter(|_| !spec.kind.is_empty() && *num_actions > 0)
+        .ok_or_else(|| {
+            BatchError::new(
+                RejectReason::Spec,
+                "spec",
+                format!("{spec} with {num_actions} actions is not a valid spec"),
+            )
+        })?;
+    // One transition at a time, through the batch check.
+    let mut one = TransitionBatch::new(spec.clone(), *num_actions, ObservationEncoding::SparseF32);
+    one.push_observation(&[]);
+    one.push(Transition {
+        observation: 0,
+        action: 0,
+        reward: 0.0,
+        discount: 0.0,
+        priority: 0.0,
+        next_observation: 0,
+    });
+    for i in 0..n {
+        let Some(t) = c.get(i) else { break };
+        one.columns.set(
+            0,
+            Transition {
+                observation: 0,
+                next_observation: 0,
+                ..t
+            },
+        );
+        one.validate().map_err(|e| {
+            let field = e.field.replacen("[0]", &format!("[{i}]"), 1);
+            BatchError::new(e.reason, format!("items.{field}"), e.problem)
+        })?;
+    }
+    let n_obs = image.observation_offsets.len();
+    for (i, (o, no)) in c
+        .observation_index
+        .iter()
+        .zip(&c.next_observation_index)
+        .enumerate()
+    {
+        if *o as usize >= n_obs || *no as usize >= n_obs {
+            return Err(BatchError::new(
+                RejectReason::IndexRange,
+                format!("items[{i}].observation"),
+                format!("refers to observation {} of {n_obs}", (*o).max(*no)),
+            ));
+        }
+    }
+    Ok(obs_len)
 }
 
 /// What a sample copied out under the lock; finished into a [`Sample`]

@@ -7,12 +7,13 @@
 //! so a subscriber that joins late gets the latest weights at once; a
 //! subscriber's queue overwrites its oldest sample, so a slow actor skips
 //! versions instead of holding the learner back. Both sides open the
-//! service with [`open_weights_service`].
+//! service with [`open_weights_service`]; [`read_weights_frame`] is the
+//! subscriber's whole check of a received frame.
 
 use std::fmt;
 
 use crossroads_config::TransportConfig;
-use crossroads_types::Weights;
+use crossroads_types::{SpecError, Weights};
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -32,7 +33,7 @@ pub const WEIGHTS_MAGIC: u32 = u32::from_le_bytes(*b"CRW1");
 pub struct WeightsFrameHeader {
     /// [`WEIGHTS_MAGIC`].
     pub magic: u32,
-    /// Layout version, 1.
+    /// [`WEIGHTS_FRAME_VERSION`].
     pub frame_version: u32,
     /// Weights version.
     pub weights_version: u64,
@@ -112,13 +113,7 @@ impl ShmWeightsPublisher {
             .publisher
             .loan_slice(weights.safetensors.len())
             .map_err(|e| ShmError::iceoryx("loaning a weights slot", e))?;
-        *sample.user_header_mut() = WeightsFrameHeader {
-            magic: WEIGHTS_MAGIC,
-            frame_version: 1,
-            weights_version: weights.version,
-            update_step: weights.update_step,
-            published_unix_ms: weights.published_unix_ms,
-        };
+        *sample.user_header_mut() = weights_frame_header(weights);
         sample.payload_mut().copy_from_slice(&weights.safetensors);
         sample
             .send()
@@ -167,9 +162,9 @@ impl ShmWeightsSubscriber {
     }
 
     /// The newest weights received since the last call, if any. Frames
-    /// that are not valid weights frames, and weights whose safetensors
-    /// metadata (read from the header only) do not say the frame's version,
-    /// are skipped with a warning.
+    /// that [`read_weights_frame`] refuses (not a weights frame, unreadable
+    /// safetensors metadata, or metadata that do not say the frame's
+    /// version) are skipped with a warning.
     pub fn latest(&mut self) -> Result<Option<Weights>, ShmError> {
         let mut newest: Option<(WeightsFrameHeader, Vec<u8>)> = None;
         while let Some(sample) = self
@@ -178,7 +173,7 @@ impl ShmWeightsSubscriber {
             .map_err(|e| ShmError::iceoryx("receiving weights", e))?
         {
             let h = *sample.user_header();
-            if h.magic != WEIGHTS_MAGIC || h.frame_version != 1 {
+            if h.magic != WEIGHTS_MAGIC || h.frame_version != WEIGHTS_FRAME_VERSION {
                 tracing::warn!(magic = h.magic, "skipping a frame that is not weights");
                 continue;
             }
@@ -192,20 +187,74 @@ impl ShmWeightsSubscriber {
         let Some((h, safetensors)) = newest else {
             return Ok(None);
         };
-        match Weights::from_safetensors(safetensors, h.update_step, h.published_unix_ms) {
-            Ok(w) if w.version == h.weights_version => Ok(Some(w)),
-            Ok(w) => {
-                tracing::warn!(
-                    frame = h.weights_version,
-                    metadata = w.version,
-                    "skipping weights whose frame and metadata disagree on the version"
-                );
-                Ok(None)
-            }
+        match read_weights_frame(&h, safetensors) {
+            Ok(w) => Ok(Some(w)),
             Err(e) => {
-                tracing::warn!(version = h.weights_version, error = %e, "skipping unreadable weights");
+                tracing::warn!(version = h.weights_version, error = %e, "skipping weights");
                 Ok(None)
             }
         }
+    }
+}
+
+/// Why a received frame is not weights.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WeightsFrameError {
+    /// Another magic or frame version.
+    #[error("not a weights frame (magic {magic:#x}, frame version {frame_version})")]
+    NotWeights {
+        /// The header's magic.
+        magic: u32,
+        /// The header's frame version.
+        frame_version: u32,
+    },
+    /// The safetensors bytes or their metadata are not valid weights.
+    #[error("unreadable weights: {0}")]
+    Unreadable(#[from] SpecError),
+    /// The header and the metadata name different versions.
+    #[error("the frame says version {frame}, its metadata {metadata}")]
+    VersionMismatch {
+        /// The header's version.
+        frame: u64,
+        /// The metadata's.
+        metadata: u64,
+    },
+}
+
+/// Layout version of [`WeightsFrameHeader`].
+pub const WEIGHTS_FRAME_VERSION: u32 = 1;
+
+/// Reads one received frame into [`Weights`]: a weights header, and
+/// safetensors bytes whose metadata (read from the header only; the
+/// tensors are checked where they are loaded) are valid and name the
+/// header's version. Trusts nothing of either.
+pub fn read_weights_frame(
+    header: &WeightsFrameHeader,
+    payload: Vec<u8>,
+) -> Result<Weights, WeightsFrameError> {
+    if header.magic != WEIGHTS_MAGIC || header.frame_version != WEIGHTS_FRAME_VERSION {
+        return Err(WeightsFrameError::NotWeights {
+            magic: header.magic,
+            frame_version: header.frame_version,
+        });
+    }
+    let w = Weights::from_safetensors(payload, header.update_step, header.published_unix_ms)?;
+    if w.version != header.weights_version {
+        return Err(WeightsFrameError::VersionMismatch {
+            frame: header.weights_version,
+            metadata: w.version,
+        });
+    }
+    Ok(w)
+}
+
+/// The header of `weights`' frame.
+pub fn weights_frame_header(weights: &Weights) -> WeightsFrameHeader {
+    WeightsFrameHeader {
+        magic: WEIGHTS_MAGIC,
+        frame_version: WEIGHTS_FRAME_VERSION,
+        weights_version: weights.version,
+        update_step: weights.update_step,
+        published_unix_ms: weights.published_unix_ms,
     }
 }

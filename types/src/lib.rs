@@ -17,7 +17,11 @@
 //! - [`weights`]: one published version of the network ([`Weights`]) and
 //!   the metadata of a weights file ([`WeightsMeta`]), read from the
 //!   safetensors header without building a tensor.
-//! - [`checkpoint`]: which names a checkpoint may have.
+//! - [`tensors`]: safetensors files of f32 tensors ([`F32Tensor`]) read
+//!   and checked without a tensor library, for weights and optimizer
+//!   state alike.
+//! - [`checkpoint`]: which names a checkpoint may have, and its manifest
+//!   ([`Manifest`]), checked against the checkpoint's files.
 //!
 //! Invariant, enforced by the crate graph: this crate depends on no tensor
 //! library (tch), no RPC framework (tonic) and no wire format (prost), so
@@ -31,16 +35,19 @@ pub mod codec;
 pub mod columns;
 pub mod sample;
 pub mod spec;
+pub mod tensors;
 pub mod weights;
 
 pub use batch::{
     BatchError, ObservationPool, ObservationSpec, RejectReason, Transition, TransitionBatch,
     ValidBatch,
 };
+pub use checkpoint::Manifest;
 pub use codec::ObservationEncoding;
 pub use columns::Columns;
 pub use sample::{PrioritiesUpdated, Sample};
 pub use spec::{
     EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
 };
+pub use tensors::F32Tensor;
 pub use weights::{Weights, WeightsMeta};

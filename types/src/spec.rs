@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::batch::MAX_OBSERVATION_LEN;
+
 /// Why a network spec, or the metadata of a weights file, is not valid.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SpecError {
@@ -173,12 +175,24 @@ impl NetworkSpec {
         Ok(spec)
     }
 
-    /// Checks that every dimension is positive and fits the trunk.
+    /// Checks that every dimension is positive and fits the trunk, and
+    /// that an observation has at most [`MAX_OBSERVATION_LEN`] values (so
+    /// [`input_len`](Self::input_len) cannot overflow).
     pub fn validate(&self) -> Result<(), SpecError> {
         let o = &self.observation;
         if o.channels <= 0 || o.rows <= 0 || o.cols <= 0 || o.extra < 0 {
             return Err(SpecError::Invalid(format!(
                 "observation dimensions must be positive: {o:?}"
+            )));
+        }
+        let len = o
+            .channels
+            .checked_mul(o.rows)
+            .and_then(|grid| grid.checked_mul(o.cols))
+            .and_then(|grid| grid.checked_add(o.extra));
+        if len.is_none_or(|len| len > MAX_OBSERVATION_LEN as i64) {
+            return Err(SpecError::Invalid(format!(
+                "an observation must have at most {MAX_OBSERVATION_LEN} values: {o:?}"
             )));
         }
         if self.num_actions <= 0 {
@@ -205,5 +219,32 @@ impl NetworkSpec {
     /// Input values the network expects per observation.
     pub fn input_len(&self) -> i64 {
         self.observation.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `[channels, rows, cols]` come from the wire as u32, and their
+    /// product overflowed i64 in `input_len` after `validate` had accepted
+    /// them (the `wire_weights` fuzz target asserts that a valid spec has
+    /// a length).
+    #[test]
+    fn an_observation_too_large_to_count_is_invalid() {
+        let mut spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8]).expect("spec");
+        spec.observation.channels = i64::from(u32::MAX);
+        spec.observation.rows = i64::from(u32::MAX);
+        spec.observation.cols = i64::from(u32::MAX);
+        let err = spec.validate().expect_err("2^96 values");
+        assert!(err.to_string().contains("at most"), "{err}");
+        spec.observation.channels = 1 << 12;
+        spec.observation.rows = 1 << 12;
+        spec.observation.cols = 1;
+        spec.observation.extra = 1;
+        assert!(spec.validate().is_err(), "one value above the limit");
+        spec.observation.extra = 0;
+        assert_eq!(spec.validate(), Ok(()));
+        assert_eq!(spec.input_len(), 1 << 24);
     }
 }

@@ -17,8 +17,6 @@
 
 use std::collections::HashMap;
 
-use safetensors::tensor::SafeTensors;
-
 use crate::spec::{NetworkSpec, SpecError};
 
 /// Value of the `format` metadata key.
@@ -79,9 +77,7 @@ impl WeightsMeta {
     /// The metadata map of safetensors bytes, read from the header only (no
     /// tensor is built or checked).
     pub fn read_metadata(bytes: &[u8]) -> Result<HashMap<String, String>, SpecError> {
-        let (_, header) = SafeTensors::read_metadata(bytes)
-            .map_err(|e| SpecError::Format(format!("not a safetensors file: {e}")))?;
-        Ok(header.metadata().clone().unwrap_or_default())
+        crate::tensors::read_metadata(bytes).map_err(|e| SpecError::Format(e.to_string()))
     }
 
     /// Reads and checks the metadata of safetensors bytes, from the header

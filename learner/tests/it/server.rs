@@ -394,3 +394,166 @@ async fn a_learner_killed_past_its_last_checkpoint_restarts_above_every_version(
     second.stop();
     second.join().await.unwrap();
 }
+
+/// Sends bytes as they are, as one gRPC message, and reads answers as
+/// bytes: a client that does not speak protobuf.
+#[derive(Debug, Clone, Copy, Default)]
+struct RawBytes;
+
+impl tonic::codec::Codec for RawBytes {
+    type Encode = Vec<u8>;
+    type Decode = Vec<u8>;
+    type Encoder = RawBytes;
+    type Decoder = RawBytes;
+
+    fn encoder(&mut self) -> RawBytes {
+        RawBytes
+    }
+
+    fn decoder(&mut self) -> RawBytes {
+        RawBytes
+    }
+}
+
+impl tonic::codec::Encoder for RawBytes {
+    type Item = Vec<u8>;
+    type Error = tonic::Status;
+
+    fn encode(
+        &mut self,
+        item: Vec<u8>,
+        dst: &mut tonic::codec::EncodeBuf<'_>,
+    ) -> Result<(), tonic::Status> {
+        bytes::BufMut::put_slice(dst, &item);
+        Ok(())
+    }
+}
+
+impl tonic::codec::Decoder for RawBytes {
+    type Item = Vec<u8>;
+    type Error = tonic::Status;
+
+    fn decode(
+        &mut self,
+        src: &mut tonic::codec::DecodeBuf<'_>,
+    ) -> Result<Option<Vec<u8>>, tonic::Status> {
+        let n = bytes::Buf::remaining(src);
+        Ok(Some(bytes::Buf::copy_to_bytes(src, n).to_vec()))
+    }
+}
+
+/// Not a protobuf message: field 15 with wire type 7, which does not exist.
+const GARBAGE: &[u8] = b"\xff\xff\xff\xff\x0fnot protobuf";
+
+async fn raw_client(addr: std::net::SocketAddr) -> tonic::client::Grpc<tonic::transport::Channel> {
+    let channel = tonic::transport::Endpoint::from_shared(format!("http://{addr}"))
+        .expect("test setup")
+        .connect()
+        .await
+        .expect("test setup");
+    tonic::client::Grpc::new(channel)
+}
+
+fn path(p: &'static str) -> tonic::codegen::http::uri::PathAndQuery {
+    tonic::codegen::http::uri::PathAndQuery::from_static(p)
+}
+
+fn assert_undecodable(status: &tonic::Status, message: &str) {
+    assert_eq!(status.code(), Code::InvalidArgument, "{status:?}");
+    assert!(
+        status.message().contains("did not decode")
+            && status
+                .message()
+                .contains(&format!("crossroads.v1.{message}")),
+        "{status:?}"
+    );
+}
+
+/// Bytes that are not protobuf answer INVALID_ARGUMENT naming the message
+/// (tonic-prost alone says INTERNAL), on unary and streaming calls of both
+/// servers, and each server keeps serving.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bytes_that_are_not_protobuf_are_invalid_argument_on_both_servers() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut config = learner_config(&dir.path().join("ckpts"));
+    // A client without the token would be stopped before the decoder.
+    config.transport.auth = Default::default();
+    let replay = replay_with_data(&config).await;
+    let learner = start_learner(&config, &replay, None).await;
+
+    let mut grpc = raw_client(replay.server.local_addr()).await;
+    grpc.ready().await.expect("connected");
+    let status = grpc
+        .unary(
+            tonic::Request::new(GARBAGE.to_vec()),
+            path("/crossroads.v1.Replay/Sample"),
+            RawBytes,
+        )
+        .await
+        .expect_err("garbage is refused");
+    assert_undecodable(&status, "SampleRequest");
+    grpc.ready().await.expect("connected");
+    let outgoing = tokio_stream::iter([GARBAGE.to_vec()]);
+    let status = match grpc
+        .streaming(
+            tonic::Request::new(outgoing),
+            path("/crossroads.v1.Replay/Insert"),
+            RawBytes,
+        )
+        .await
+    {
+        Err(status) => status,
+        Ok(response) => response
+            .into_inner()
+            .message()
+            .await
+            .expect_err("garbage is refused"),
+    };
+    assert_undecodable(&status, "InsertRequest");
+    let mut transport = config.transport.clone();
+    transport.replay_endpoint = format!("http://{}", replay.server.local_addr());
+    let replay_client = ReplayClient::new(&transport, &config.replay.table).expect("test setup");
+    let info = replay_client
+        .info()
+        .await
+        .expect("the replay server still serves");
+    assert!(info.size > 0);
+
+    let mut grpc = raw_client(learner.local_addr()).await;
+    grpc.ready().await.expect("connected");
+    let status = grpc
+        .unary(
+            tonic::Request::new(GARBAGE.to_vec()),
+            path("/crossroads.v1.Learner/Status"),
+            RawBytes,
+        )
+        .await
+        .expect_err("garbage is refused");
+    assert_undecodable(&status, "StatusRequest");
+    grpc.ready().await.expect("connected");
+    let status = match grpc
+        .server_streaming(
+            tonic::Request::new(GARBAGE.to_vec()),
+            path("/crossroads.v1.Learner/SubscribeWeights"),
+            RawBytes,
+        )
+        .await
+    {
+        Err(status) => status,
+        Ok(response) => response
+            .into_inner()
+            .message()
+            .await
+            .expect_err("garbage is refused"),
+    };
+    assert_undecodable(&status, "SubscribeWeightsRequest");
+    client(&learner, None)
+        .status()
+        .await
+        .expect("the learner still serves");
+
+    learner.stop();
+    learner.join().await.unwrap();
+    replay.shutdown.trigger();
+    replay.server.join().await.unwrap();
+}

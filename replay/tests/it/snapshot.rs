@@ -208,3 +208,45 @@ async fn keeps_only_the_newest_snapshots() {
         assert!(p.exists());
     }
 }
+
+/// A snapshot whose checksums hold but whose items a valid batch could not
+/// have stored, or whose insert count is below the items it holds (the
+/// `snapshot` fuzz target's property: a restored table samples, and every
+/// sample is a valid batch) is refused, and the table keeps what it held. Before, `restore` checked only lengths, indices and
+/// priorities, and such items reached the learner in samples.
+#[tokio::test]
+async fn an_image_no_valid_batch_could_make_is_refused_with_nothing_changed() {
+    let t = filled().await;
+    let good = t.image();
+    type Spoil = fn(&mut TableImage);
+    let spoil: [(&str, Spoil); 7] = [
+        ("action", |i| i.items.actions[3] = 99),
+        // Found by the fuzz target: the limiter then never let a sample
+        // through (fewer inserts than the minimum size).
+        ("inserts", |i| i.inserts_total = 0),
+        ("reward", |i| i.items.rewards[0] = f32::NAN),
+        ("discount", |i| i.items.discounts[1] = 1.5),
+        ("spec", |i| i.spec = None),
+        ("shape", |i| {
+            if let Some((spec, _)) = &mut i.spec {
+                spec.shape.clear();
+            }
+        }),
+        ("observation", |i| {
+            // The first observation's first dictionary value (after the
+            // one-byte channel and value counts) NaN; its length holds.
+            assert!(i.observation_offsets[1] >= 6);
+            i.observation_data[2..6].copy_from_slice(&f32::NAN.to_le_bytes());
+        }),
+    ];
+    for (what, spoil) in spoil {
+        let mut bad = good.clone();
+        spoil(&mut bad);
+        let restored = table(50, 0.6);
+        insert(&restored, 900, 3, None).await;
+        let before = restored.image();
+        let err = restored.restore(&bad).expect_err(what);
+        assert!(!err.field.is_empty(), "{what}: {err}");
+        assert_eq!(restored.image(), before, "{what}: nothing changed");
+    }
+}
