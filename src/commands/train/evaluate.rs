@@ -17,6 +17,10 @@ use super::record::{Evaluation, Reached, write_atomic};
 use super::session::Session;
 use crate::network_policy::NetworkPolicy;
 
+/// How long a failed fetch of the latest weights waits for the learner's
+/// exit (its last checkpoint and its gRPC drain, at most 10 s).
+const EXIT_WAIT: Duration = Duration::from_secs(15);
+
 impl Session {
     /// Fetches the latest weights and evaluates them greedily on
     /// `trials` trials of the run's scenario; records (curve, `last/`) and
@@ -31,15 +35,9 @@ impl Session {
         bar: &ProgressBar,
     ) -> anyhow::Result<(Evaluation, bool, Duration)> {
         let began = Instant::now();
-        let (version, safetensors) = if self.learner.exited().is_none() {
-            let w = self
-                .learner_client
-                .latest_weights()
-                .await
-                .context("fetching the latest weights")?;
-            (w.version, w.safetensors)
-        } else {
-            self.newest_checkpoint()?
+        let (version, safetensors) = match self.latest_from_learner().await? {
+            Some(latest) => latest,
+            None => self.newest_checkpoint()?,
         };
         let e = self.evaluate_bytes(&safetensors, version, trials).await?;
         let took = began.elapsed();
@@ -84,6 +82,31 @@ impl Session {
             .await
         {
             tracing::warn!(error = %err, "reporting the evaluation to the learner");
+        }
+    }
+
+    /// The learner's latest weights and their version, or `None` once it
+    /// has exited: its last checkpoint holds them. A learner that reached
+    /// its budget stops answering while it writes that checkpoint, so a
+    /// failed fetch waits ([`EXIT_WAIT`] at most) for the exit before it
+    /// counts as an error (seen in CI: a resumed run with few updates left
+    /// lost its final evaluation to that race).
+    async fn latest_from_learner(&mut self) -> anyhow::Result<Option<(u64, Vec<u8>)>> {
+        if self.learner.exited().is_some() {
+            return Ok(None);
+        }
+        match self.learner_client.latest_weights().await {
+            Ok(w) => Ok(Some((w.version, w.safetensors))),
+            Err(e) => {
+                let deadline = Instant::now() + EXIT_WAIT;
+                while Instant::now() < deadline {
+                    if self.learner.exited().is_some() {
+                        return Ok(None);
+                    }
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+                Err(anyhow::Error::from(e).context("fetching the latest weights"))
+            }
         }
     }
 
