@@ -65,7 +65,11 @@ fuzz_target!(|data: &[u8]| {
     let reread = wal::decode_segment(&again).expect("a header it wrote");
     assert_eq!(reread.torn, None);
     assert_eq!(reread.valid_len, again.len());
-    assert_eq!(encode(&reread.records), again, "encode -> decode -> encode is a fixed point");
+    assert_eq!(
+        encode(&reread.records),
+        again,
+        "encode -> decode -> encode is a fixed point"
+    );
     for (_, image) in decoded.records {
         let Ok((first_key, batch)) = PreparedBatch::from_image(image) else {
             continue;
@@ -73,7 +77,12 @@ fuzz_target!(|data: &[u8]| {
         let image = batch.to_image(first_key);
         let (key, same) = PreparedBatch::from_image(image.clone()).expect("its own image");
         assert_eq!(key, first_key);
-        assert_eq!(encode(&[("t".to_owned(), same.to_image(key))]), encode(&[("t".to_owned(), image)]));
-        empty_table().insert_now(&batch).expect("a checked batch inserts");
+        assert_eq!(
+            encode(&[("t".to_owned(), same.to_image(key))]),
+            encode(&[("t".to_owned(), image)])
+        );
+        empty_table()
+            .insert_now(&batch)
+            .expect("a checked batch inserts");
     }
 });

@@ -263,7 +263,11 @@ fn wal() -> Vec<Seed> {
     vec![
         ("wal", "segment".into(), [vec![0], segment].concat()),
         ("wal", "torn-tail".into(), [vec![0], torn].concat()),
-        ("wal", "record-body".into(), [vec![1], record[8..].to_vec()].concat()),
+        (
+            "wal",
+            "record-body".into(),
+            [vec![1], record[8..].to_vec()].concat(),
+        ),
     ]
 }
 
