@@ -310,20 +310,9 @@ impl Snapshots {
 
     /// Snapshot files by sequence number, newest first.
     fn list(&self) -> Result<Vec<(u64, PathBuf)>, SnapshotError> {
-        let mut found = Vec::new();
-        for entry in fs::read_dir(&self.dir).map_err(io(&self.dir, "listing"))? {
-            let entry = entry.map_err(io(&self.dir, "listing"))?;
-            let name = entry.file_name();
-            let Some(name) = name.to_str() else { continue };
-            if let Some(seq) = name
-                .strip_prefix(PREFIX)
-                .and_then(|s| s.strip_suffix(SUFFIX))
-                .and_then(|s| s.parse::<u64>().ok())
-            {
-                found.push((seq, entry.path()));
-            }
-        }
-        found.sort_by_key(|(seq, _)| std::cmp::Reverse(*seq));
+        let mut found =
+            numbered_files(&self.dir, PREFIX, SUFFIX).map_err(io(&self.dir, "listing"))?;
+        found.reverse();
         Ok(found)
     }
 
@@ -460,6 +449,30 @@ impl Snapshots {
             })
         }
     }
+}
+
+/// The files `<prefix><number><suffix>` of `dir` by number, smallest
+/// first (snapshots and write-ahead-log segments).
+pub(crate) fn numbered_files(
+    dir: &Path,
+    prefix: &str,
+    suffix: &str,
+) -> std::io::Result<Vec<(u64, PathBuf)>> {
+    let mut found = Vec::new();
+    for entry in fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        if let Some(seq) = name
+            .strip_prefix(prefix)
+            .and_then(|s| s.strip_suffix(suffix))
+            .and_then(|s| s.parse::<u64>().ok())
+        {
+            found.push((seq, entry.path()));
+        }
+    }
+    found.sort_by_key(|(seq, _)| *seq);
+    Ok(found)
 }
 
 pub(crate) fn put_u32(out: &mut Vec<u8>, v: u32) {

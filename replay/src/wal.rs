@@ -231,21 +231,7 @@ pub fn decode_segment(bytes: &[u8]) -> Result<Decoded, String> {
 
 /// Segment files of `dir` by sequence number, oldest first.
 fn segments(dir: &Path) -> Result<Vec<(u64, PathBuf)>, WalError> {
-    let mut found = Vec::new();
-    for entry in fs::read_dir(dir).map_err(io(dir, "listing"))? {
-        let entry = entry.map_err(io(dir, "listing"))?;
-        let name = entry.file_name();
-        let Some(name) = name.to_str() else { continue };
-        if let Some(seq) = name
-            .strip_prefix(PREFIX)
-            .and_then(|s| s.strip_suffix(SUFFIX))
-            .and_then(|s| s.parse::<u64>().ok())
-        {
-            found.push((seq, entry.path()));
-        }
-    }
-    found.sort_by_key(|(seq, _)| *seq);
-    Ok(found)
+    snapshot::numbered_files(dir, PREFIX, SUFFIX).map_err(io(dir, "listing"))
 }
 
 fn sync_dir(dir: &Path) -> Result<(), WalError> {
