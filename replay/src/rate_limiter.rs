@@ -81,22 +81,22 @@ impl RateLimiter {
 
     /// Records `n` inserted items.
     pub fn inserted(&mut self, n: u64) {
-        self.inserts += n;
+        self.inserts = self.inserts.saturating_add(n);
     }
 
     /// Records `n` sampled items.
     pub fn sampled(&mut self, n: u64) {
-        self.samples += n;
+        self.samples = self.samples.saturating_add(n);
     }
 
     /// Records that an insert had to wait.
     pub fn insert_waited(&mut self) {
-        self.insert_waits += 1;
+        self.insert_waits = self.insert_waits.saturating_add(1);
     }
 
     /// Records that a sample had to wait.
     pub fn sample_waited(&mut self) {
-        self.sample_waits += 1;
+        self.sample_waits = self.sample_waits.saturating_add(1);
     }
 
     /// Items inserted and sampled so far.

@@ -582,6 +582,18 @@ impl Table {
                 format!("{} inserts for {n} items held", image.inserts_total),
             ));
         }
+        // Keys count up from here; a damaged count must not leave them
+        // nowhere to go (no table inserts 2^63 items).
+        if image.next_key > MAX_RESTORED_KEY {
+            return Err(BatchError::new(
+                RejectReason::BadRequest,
+                "next_key",
+                format!(
+                    "{} is beyond any key a table hands out (at most {MAX_RESTORED_KEY})",
+                    image.next_key
+                ),
+            ));
+        }
         let n_obs = image.observation_offsets.len();
         let keep = n.min(self.config.capacity);
         let skip = n - keep;
@@ -699,6 +711,9 @@ impl Table {
         }
     }
 }
+
+/// The largest next key a restored image may hold.
+const MAX_RESTORED_KEY: u64 = 1 << 63;
 
 /// Checks what a snapshot's image says of its items, as
 /// [`TransitionBatch::validate`] checks a batch's: returns the length of
@@ -1013,8 +1028,12 @@ impl Inner {
                 None => ignored += 1,
             }
         }
-        self.priority_updates_total += u64::from(updated);
-        self.ignored_updates_total += u64::from(ignored);
+        self.priority_updates_total = self
+            .priority_updates_total
+            .saturating_add(u64::from(updated));
+        self.ignored_updates_total = self
+            .ignored_updates_total
+            .saturating_add(u64::from(ignored));
         PrioritiesUpdated { updated, ignored }
     }
 

@@ -212,15 +212,19 @@ async fn keeps_only_the_newest_snapshots() {
 /// A snapshot whose checksums hold but whose items a valid batch could not
 /// have stored, or whose insert count is below the items it holds (the
 /// `snapshot` fuzz target's property: a restored table samples, and every
-/// sample is a valid batch) is refused, and the table keeps what it held. Before, `restore` checked only lengths, indices and
-/// priorities, and such items reached the learner in samples.
+/// sample is a valid batch) is refused, and the table keeps what it held.
+/// Before, `restore` checked only lengths, indices and priorities, and
+/// such items reached the learner in samples.
 #[tokio::test]
 async fn an_image_no_valid_batch_could_make_is_refused_with_nothing_changed() {
     let t = filled().await;
     let good = t.image();
     type Spoil = fn(&mut TableImage);
-    let spoil: [(&str, Spoil); 7] = [
+    let spoil: [(&str, Spoil); 8] = [
         ("action", |i| i.items.actions[3] = 99),
+        // Found by the fuzz target (CI): keys would overflow at the next
+        // insert.
+        ("next_key", |i| i.next_key = u64::MAX),
         // Found by the fuzz target: the limiter then never let a sample
         // through (fewer inserts than the minimum size).
         ("inserts", |i| i.inserts_total = 0),
@@ -249,4 +253,32 @@ async fn an_image_no_valid_batch_could_make_is_refused_with_nothing_changed() {
         assert!(!err.field.is_empty(), "{what}: {err}");
         assert_eq!(restored.image(), before, "{what}: nothing changed");
     }
+}
+
+/// Counts restored from a file are counted on without overflow: a table
+/// restored at the largest counts samples and takes priority updates
+/// (found by the fuzz target in CI: the sample count overflowed and the
+/// server panicked on the first sample).
+#[tokio::test]
+async fn counts_restored_at_their_largest_saturate_instead_of_overflowing() {
+    let t = filled().await;
+    let mut image = t.image();
+    image.samples_total = u64::MAX - 1;
+    image.inserts_total = u64::MAX;
+    image.priority_updates_total = u64::MAX;
+    image.ignored_updates_total = u64::MAX;
+    let restored = table(50, 0.6);
+    restored.restore(&image).expect("restores");
+    let shutdown = Shutdown::new();
+    let sample = restored
+        .sample(8, 0.5, Duration::ZERO, &shutdown)
+        .await
+        .expect("samples");
+    let keys = sample.keys.clone();
+    restored
+        .update_priorities(&keys, &vec![2.0; keys.len()])
+        .expect("updates");
+    let after = restored.image();
+    assert_eq!(after.samples_total, u64::MAX);
+    assert_eq!(after.priority_updates_total, u64::MAX);
 }
