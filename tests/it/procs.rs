@@ -70,10 +70,28 @@ impl Proc {
         let line = self
             .wait_for(needle, Duration::from_secs(60))
             .unwrap_or_else(|| panic!("never logged {needle:?}"));
-        line.split_whitespace()
-            .find_map(|w| w.strip_prefix("addr="))
-            .unwrap_or_else(|| panic!("no addr= in {line:?}"))
-            .to_owned()
+        addr_in(&line)
+    }
+
+    /// The `addr=` of the first log line containing each of `needles`, in
+    /// whatever order they come; fails the test if one does not come
+    /// within a minute.
+    pub fn addrs<const N: usize>(&self, needles: [&str; N]) -> [String; N] {
+        let mut found: [Option<String>; N] = std::array::from_fn(|_| None);
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while found.iter().any(Option::is_none) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let line = self
+                .lines
+                .recv_timeout(left)
+                .unwrap_or_else(|_| panic!("never logged all of {needles:?} (found {found:?})"));
+            for (needle, slot) in needles.iter().zip(&mut found) {
+                if slot.is_none() && line.contains(needle) {
+                    *slot = Some(addr_in(&line));
+                }
+            }
+        }
+        found.map(|a| a.expect("found"))
     }
 
     /// Whether it is still running.
@@ -120,4 +138,12 @@ impl Drop for Proc {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// The `addr=` field of a log line.
+fn addr_in(line: &str) -> String {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix("addr="))
+        .unwrap_or_else(|| panic!("no addr= in {line:?}"))
+        .to_owned()
 }
