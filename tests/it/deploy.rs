@@ -749,6 +749,122 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
         "",
         "containers, volumes or networks left"
     );
+
+    // The same image and settings with TLS and a token.
+    compose_trains_with_tls_and_a_token(project.program.clone(), &tag, &project.files[1], &rt);
+}
+
+/// `deploy/make-certs.sh`, then `docker compose -f compose.yaml -f
+/// compose.tls.yaml up` (plus the test's `small` settings): the roles
+/// train over mutual TLS with the token, the checkpoint CLI on the host
+/// reaches the learner with the same files, and is refused without the
+/// token or without TLS.
+fn compose_trains_with_tls_and_a_token(
+    program: Vec<String>,
+    tag: &str,
+    small: &Path,
+    rt: &tokio::runtime::Runtime,
+) {
+    use std::os::unix::fs::PermissionsExt;
+    let certs = make_certs();
+    // The containers' user (uid 10001) reads the bind-mounted folder.
+    std::fs::set_permissions(certs.path(), std::fs::Permissions::from_mode(0o755))
+        .expect("chmod the certificates' folder");
+    let learner_port = free_port();
+    let project = Project {
+        program,
+        name: format!("crossroads-tls-test-{}", std::process::id()),
+        files: vec![
+            repo().join("deploy/compose.yaml"),
+            repo().join("deploy/compose.tls.yaml"),
+            small.to_path_buf(),
+        ],
+        env: vec![
+            ("CROSSROADS_IMAGE".into(), tag.to_owned()),
+            ("ACTORS".into(), "1".into()),
+            ("MIN_SIZE_TO_SAMPLE".into(), "500".into()),
+            ("LEARNER_PORT".into(), learner_port.to_string()),
+            ("CERTS".into(), certs.path().display().to_string()),
+        ],
+    };
+    run(&mut project.command(&["up", "-d"]));
+    let containers = wait_for("three running containers", Duration::from_secs(120), || {
+        let c = project.containers();
+        let count = |s: &str| c.get(s).map_or(0, Vec::len);
+        (count("replay") == 1 && count("learner") == 1 && count("actor") == 1).then_some(c)
+    });
+    let ip = |s: &str| containers[s][0].1.clone();
+    // Metrics stay plain HTTP: the actor inserts over TLS and follows
+    // weights the learner trained on them.
+    let version = wait_for(
+        "weights v2+ at the actor over TLS",
+        Duration::from_secs(240),
+        || {
+            sample(
+                &scrape(rt, &ip("actor")),
+                "crossroads_actor_weights_version",
+            )
+            .filter(|&v| v >= 2.0)
+        },
+    );
+    let inserted = sample(
+        &scrape(rt, &ip("replay")),
+        "crossroads_replay_inserts_total",
+    );
+
+    let url = format!("https://localhost:{learner_port}");
+    let file = |f: &str| certs.path().join(f);
+    let with = |c: &mut Command, token: bool| {
+        c.env("CROSSROADS_TRANSPORT__TLS__CA_FILE", file("ca.pem"))
+            .env(
+                "CROSSROADS_TRANSPORT__TLS__CLIENT_CERT_FILE",
+                file("client.pem"),
+            )
+            .env(
+                "CROSSROADS_TRANSPORT__TLS__CLIENT_KEY_FILE",
+                file("client.key"),
+            )
+            .env_remove("CROSSROADS_TOKEN");
+        if token {
+            c.env("CROSSROADS_TRANSPORT__AUTH__TOKEN_FILE", file("token"));
+        }
+    };
+    let save = |tls: bool, token: bool, url: &str| {
+        let mut c = crossroads();
+        c.args(["checkpoints", "--learner", url, "--json", "save"]);
+        if tls {
+            with(&mut c, token);
+        }
+        c.output().expect("run crossroads checkpoints")
+    };
+    let saved = save(true, true, &url);
+    assert!(
+        saved.status.success(),
+        "save over TLS with the token: {}",
+        String::from_utf8_lossy(&saved.stderr)
+    );
+    let saved: serde_json::Value = serde_json::from_str(&text(&saved)).expect("save prints JSON");
+    assert!(saved["id"].is_string(), "{saved}");
+    let refused = save(true, false, &url);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && err.contains("authorization"),
+        "save without the token is refused, naming what is missing: {err}"
+    );
+    let plain = save(false, false, &format!("http://localhost:{learner_port}"));
+    assert!(!plain.status.success(), "plain HTTP to the TLS port fails");
+    eprintln!(
+        "deploy (TLS + token): the actor on weights v{version}, the replay took {inserted:?} \
+         transitions; the CLI saved {} over mutual TLS; without the token: {}",
+        saved["id"],
+        err.lines().last().unwrap_or_default()
+    );
+    run(&mut project.command(&["down", "-v", "--timeout", "20"]));
+    assert_eq!(
+        project.leftovers(),
+        "",
+        "containers, volumes or networks left"
+    );
 }
 
 struct RemoveImage(String);
