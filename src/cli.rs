@@ -677,6 +677,11 @@ pub struct DoctorArgs {
     /// Print the report as one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Time the forward passes again while another process keeps one
+    /// core busy, and print both medians and their ratio: how much a busy
+    /// machine slows libtorch here.
+    #[arg(long)]
+    pub busy: bool,
 }
 
 /// `crossroads replay`. Each flag overrides the `[replay]` key of the same

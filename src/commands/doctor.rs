@@ -33,6 +33,9 @@ struct Report {
     cuda_available: bool,
     mkl: bool,
     openmp: bool,
+    /// `OMP_WAIT_POLICY` as this process runs (the binary makes it
+    /// `passive` unless the user set it), or `unset`.
+    openmp_wait_policy: String,
     /// The network timed, in one line (`dueling conv 2344-16-32-256 -> 5`).
     network: String,
     /// Where its settings came from: the configuration file and the
@@ -49,6 +52,44 @@ struct Report {
     /// One update (forward, double DQN targets, backward, optimizer step)
     /// at `learner_batch`, from the median of three rounds' rates.
     learner_update_median_ms: f64,
+    /// With `--busy`: the forward passes again beside a busy process.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    busy: Option<Busy>,
+}
+
+/// The forward passes timed while another process spins on a core.
+#[derive(Debug, Serialize)]
+struct Busy {
+    actor_forward_median_ms: f64,
+    learner_forward_median_ms: f64,
+    /// Busy over quiet median, actor inference.
+    actor_forward_ratio: f64,
+    /// Busy over quiet median, learner forward.
+    learner_forward_ratio: f64,
+}
+
+/// Runs `f` while another process spins on a core (a shell loop, killed
+/// after). A separate process, not a thread of this one: only then do
+/// libgomp's spinning threads lose their core to it and collapse (a
+/// spinning thread here showed nothing).
+fn beside_a_busy_process<T>(f: impl FnOnce() -> anyhow::Result<T>) -> anyhow::Result<T> {
+    struct Killed(std::process::Child);
+    impl Drop for Killed {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let _busy = Killed(
+        std::process::Command::new("sh")
+            .args(["-c", "while :; do :; done"])
+            .stdin(std::process::Stdio::null())
+            .spawn()
+            .context("starting a busy process (sh) for --busy")?,
+    );
+    // Let it get its core first.
+    std::thread::sleep(Duration::from_millis(200));
+    f()
 }
 
 /// The configuration layers of `crossroads doctor`: the global ones, over
@@ -93,6 +134,24 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     let learner_batch = learner.batch_size;
     let update = updates_per_second(&sim, learner, 3, Duration::from_millis(300))
         .context("timing learner updates")?;
+    let actor_forward = time_inference(&net, actor_batch)?;
+    let learner_forward = time_forward(&net, learner_batch as usize)?;
+    let busy = if args.busy {
+        let (actor, learner) = beside_a_busy_process(|| {
+            Ok((
+                time_inference(&net, actor_batch)?,
+                time_forward(&net, learner_batch as usize)?,
+            ))
+        })?;
+        Some(Busy {
+            actor_forward_median_ms: actor,
+            learner_forward_median_ms: learner,
+            actor_forward_ratio: actor / actor_forward,
+            learner_forward_ratio: learner / learner_forward,
+        })
+    } else {
+        None
+    };
     let report = Report {
         version: env!("CARGO_PKG_VERSION"),
         cores,
@@ -100,13 +159,15 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         cuda_available: tch::Cuda::is_available(),
         mkl: tch::utils::has_mkl(),
         openmp: tch::utils::has_openmp(),
+        openmp_wait_policy: std::env::var("OMP_WAIT_POLICY").unwrap_or_else(|_| "unset".into()),
         network: super::bench::describe_network(&spec),
         config: source,
         actor_batch,
-        actor_forward_median_ms: time_inference(&net, actor_batch)?,
+        actor_forward_median_ms: actor_forward,
         learner_batch,
-        learner_forward_median_ms: time_forward(&net, learner_batch as usize)?,
+        learner_forward_median_ms: learner_forward,
         learner_update_median_ms: 1e3 / update.updates_per_sec,
+        busy,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -116,6 +177,10 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         println!("  torch threads    {}", report.torch_threads);
         println!("  CUDA available   {}", report.cuda_available);
         println!("  MKL / OpenMP     {} / {}", report.mkl, report.openmp);
+        println!(
+            "  OpenMP waits     {} (OMP_WAIT_POLICY)",
+            report.openmp_wait_policy
+        );
         println!("  network          {} ({})", report.network, report.config);
         println!(
             "  actor forward    {:.3} ms median (batch {}, actor.envs)",
@@ -129,6 +194,16 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
             "  learner update   {:.3} ms median (batch {})",
             report.learner_update_median_ms, report.learner_batch
         );
+        if let Some(b) = &report.busy {
+            println!(
+                "  beside a busy core: actor forward {:.3} ms ({:.2}x quiet), learner forward \
+                 {:.3} ms ({:.2}x)",
+                b.actor_forward_median_ms,
+                b.actor_forward_ratio,
+                b.learner_forward_median_ms,
+                b.learner_forward_ratio
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

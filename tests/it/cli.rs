@@ -239,6 +239,50 @@ fn doctor_times_the_network_a_run_would_train() {
     assert_eq!(report["network"], "dueling mlp 2812-32 -> 5", "{report}");
 }
 
+/// `crossroads doctor --json` of a small network, with `OMP_WAIT_POLICY`
+/// as given (None: unset), and the report.
+fn doctor_with_wait_policy(policy: Option<&str>, extra: &[&str]) -> serde_json::Value {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_crossroads"));
+    c.args(["--set", "learner.trunk=mlp", "--set", "learner.hidden=[32]"])
+        .args(["doctor", "--json"])
+        .args(extra)
+        .env_remove("CROSSROADS_CONFIG")
+        .env_remove("CROSSROADS_EXPERIMENT");
+    match policy {
+        Some(p) => c.env("OMP_WAIT_POLICY", p),
+        None => c.env_remove("OMP_WAIT_POLICY"),
+    };
+    let out = c.output().expect("run crossroads doctor");
+    assert!(out.status.success(), "{}", stderr(&out));
+    serde_json::from_str(&stdout(&out)).expect("JSON")
+}
+
+/// libgomp reads its wait policy before `main`; the binary re-executes
+/// itself with the passive one unless the user chose a policy.
+#[test]
+fn every_command_runs_with_passive_openmp_threads_unless_the_user_chose() {
+    let report = doctor_with_wait_policy(None, &[]);
+    assert_eq!(report["openmp_wait_policy"], "passive", "{report}");
+    let report = doctor_with_wait_policy(Some("active"), &[]);
+    assert_eq!(report["openmp_wait_policy"], "active", "{report}");
+}
+
+/// Beside a process spinning on one of the cores, a forward pass is not
+/// much slower than quiet. With libgomp's spinning threads it was 41x
+/// slower on this project's 2-core Intel machine (4.5x on the AMD one);
+/// losing a core's share costs at most 2x; the bound leaves room for the
+/// noise of tests running side by side, not for the collapse.
+#[test]
+fn a_busy_core_does_not_collapse_the_forward_pass() {
+    let report = doctor_with_wait_policy(None, &["--busy"]);
+    let busy = &report["busy"];
+    for key in ["actor_forward_ratio", "learner_forward_ratio"] {
+        let ratio = busy[key].as_f64().expect("a ratio");
+        assert!(ratio.is_finite() && ratio > 0.0, "{key}: {report}");
+        assert!(ratio < 6.0, "{key} {ratio:.1}x: {report}");
+    }
+}
+
 /// A config file of the older schema still runs, with a warning per moved
 /// key on standard error; the effective configuration is the new schema.
 #[test]

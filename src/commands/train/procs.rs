@@ -159,15 +159,11 @@ impl Addresses {
         format!("{}://{}", self.scheme, self.learner)
     }
 
-    /// The variables every role gets (they override the file). The roles
-    /// share this machine's cores, so libgomp's threads sleep instead of
-    /// spinning while they wait (unless the user chose otherwise): spinning
-    /// threads of one role starve the others.
+    /// The variables every role gets (they override the file). Each role
+    /// is this binary, which sets libgomp's passive wait policy itself
+    /// (`main`), so the roles sharing these cores do not starve each other.
     pub fn env(&self) -> Vec<(String, String)> {
         let mut env = Vec::new();
-        if std::env::var_os("OMP_WAIT_POLICY").is_none() {
-            env.push(("OMP_WAIT_POLICY".into(), "passive".into()));
-        }
         env.extend([
             ("CROSSROADS_REPLAY__LISTEN".into(), self.replay.to_string()),
             (
