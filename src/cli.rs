@@ -839,6 +839,27 @@ pub enum BenchTarget {
         #[arg(long)]
         json: bool,
     },
+    /// Time to target: `crossroads train` of a built-in experiment from
+    /// each seed (actor.seed and learner.seed), stopping at the
+    /// experiment's target ([train] target_*); prints the wall time, env
+    /// steps and updates to the confirmed target per seed and their
+    /// medians, with the machine. --set applies to every training.
+    TimeToTarget {
+        /// Training seeds, comma-separated.
+        #[arg(long, default_value = "1,2,3", value_delimiter = ',')]
+        seeds: Vec<u64>,
+        /// Give up on a seed after this many minutes (it counts as not
+        /// reached).
+        #[arg(long, default_value_t = 15.0)]
+        minutes: f64,
+        /// Keep the run folders here (default: a temporary folder, removed
+        /// after).
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Learner: updates/s of the default network at each batch size on
     /// in-memory batches, then fed by a replay server over loopback gRPC
     /// (with the fraction of time spent waiting for samples), and the same

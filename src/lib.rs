@@ -51,7 +51,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::SumoCheck(args) => commands::sumo_check::run(&args),
         Command::Render(args) => commands::render::run(&args),
         Command::Replay(_) => commands::replay::run(&config),
-        Command::Bench(args) => commands::bench::run(&config, &args),
+        Command::Bench(args) => commands::bench::run(&cli.global, &config, &args),
         Command::Learner(_) => commands::learner::run(&config),
         Command::Checkpoints(args) => commands::checkpoints::run(&config, &args),
         Command::Actor(args) => commands::actor::run(&config, &args),

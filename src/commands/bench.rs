@@ -6,15 +6,30 @@ use std::time::Duration;
 use crossroads_config::Config;
 use crossroads_sim::bench_builtin;
 
-use crate::cli::{BenchArgs, BenchTarget};
+use crate::cli::{BenchArgs, BenchTarget, GlobalArgs};
 
 mod actor;
 mod learner;
 mod load;
+mod target;
 
 /// Runs the chosen measurement and prints its figures.
-pub fn run(config: &Config, args: &BenchArgs) -> anyhow::Result<ExitCode> {
+pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Result<ExitCode> {
     match &args.target {
+        BenchTarget::TimeToTarget {
+            seeds,
+            minutes,
+            out,
+            json,
+        } => target::run(
+            global,
+            &target::Options {
+                seeds: seeds.clone(),
+                minutes: *minutes,
+                out: out.clone(),
+                json: *json,
+            },
+        ),
         BenchTarget::Learner {
             batch,
             threads,

@@ -350,3 +350,65 @@ fn a_mismatched_observation_is_refused_by_every_role() {
         "{err}"
     );
 }
+
+/// `bench time-to-target` trains each seed into its own folder and reads
+/// the confirmed target from its summary. The target here is one the
+/// untrained network meets (10 % success over 50 trials), so the test
+/// checks the plumbing in seconds, not learning.
+#[test]
+fn bench_time_to_target_trains_each_seed_and_reports_medians() {
+    let out = tempfile::tempdir().expect("temp dir");
+    let folder = out.path().join("runs");
+    let folder_arg = folder.display().to_string();
+    let result = crossroads(&[
+        "--set",
+        "train.target_success=0.01",
+        "--set",
+        "train.target_collision=1",
+        "--set",
+        "train.eval_trials=50",
+        "--set",
+        "train.confirm_trials=50",
+        "--set",
+        "learner.trunk=mlp",
+        "--set",
+        "learner.hidden=[32]",
+        "--set",
+        "telemetry.metrics_addr=127.0.0.1:0",
+        "bench",
+        "time-to-target",
+        "--seeds",
+        "3,4",
+        "--minutes",
+        "2",
+        "--out",
+        &folder_arg,
+        "--json",
+    ]);
+    assert!(result.status.success(), "{}", stderr(&result));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&result)).expect("JSON");
+    assert_eq!(report["trained"], "experiment ttg-left", "{report}");
+    assert_eq!(report["reached"], 2, "{report}");
+    let seeds = report["seeds"].as_array().expect("rows");
+    assert_eq!(seeds.len(), 2, "{report}");
+    for (row, seed) in seeds.iter().zip([3, 4]) {
+        assert_eq!(row["seed"], seed, "{report}");
+        assert_eq!(row["status"], "target", "{report}");
+        let summary = folder.join(format!("seed-{seed}/summary.json"));
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&summary).expect("summary"))
+                .expect("summary JSON");
+        assert_eq!(
+            row["wall_seconds_to_target"], summary["reached"]["evaluation"]["wall_seconds"],
+            "{report}"
+        );
+        let config = std::fs::read_to_string(folder.join(format!("seed-{seed}/config.toml")))
+            .expect("the run's config");
+        assert!(config.contains(&format!("seed = {seed}")), "{config}");
+    }
+    assert!(report["median_wall_seconds"].as_f64().is_some(), "{report}");
+
+    let bad = crossroads(&["bench", "time-to-target", "--minutes", "0"]);
+    assert!(!bad.status.success());
+    assert!(stderr(&bad).contains("--minutes"), "{}", stderr(&bad));
+}

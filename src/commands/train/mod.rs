@@ -29,7 +29,7 @@
 mod evaluate;
 mod prepare;
 mod procs;
-mod record;
+pub(crate) mod record;
 pub(crate) mod session;
 mod watch;
 
