@@ -125,54 +125,43 @@ pub fn sample_from_wire(response: pb::SampleResponse) -> Result<Sample, BatchErr
     })
 }
 
+/// A table description moved field by field between the domain's and the
+/// wire's structs of the same fields (`TableInfo`, `RateLimiterInfo`), so
+/// both directions name the fields once.
+macro_rules! table_info {
+    ($i:ident => $($table:ident)::+, $($limiter:ident)::+) => {
+        $($table)::+ {
+            name: $i.name,
+            size: $i.size,
+            capacity: $i.capacity,
+            inserts_total: $i.inserts_total,
+            samples_total: $i.samples_total,
+            priority_updates_total: $i.priority_updates_total,
+            ignored_updates_total: $i.ignored_updates_total,
+            rejections_total: $i.rejections_total.into_iter().collect(),
+            rate_limiter: $i.rate_limiter.map(|r| $($limiter)::+ {
+                min_size_to_sample: r.min_size_to_sample,
+                samples_per_insert: r.samples_per_insert,
+                error_tolerance: r.error_tolerance,
+                can_sample: r.can_sample,
+                can_insert: r.can_insert,
+                sample_waits_total: r.sample_waits_total,
+                insert_waits_total: r.insert_waits_total,
+            }),
+            bytes_stored: $i.bytes_stored,
+            last_snapshot_unix_ms: $i.last_snapshot_unix_ms,
+        }
+    };
+}
+
 /// A table's description on the wire.
 pub fn table_info_to_wire(i: TableInfo) -> pb::TableInfo {
-    pb::TableInfo {
-        name: i.name,
-        size: i.size,
-        capacity: i.capacity,
-        inserts_total: i.inserts_total,
-        samples_total: i.samples_total,
-        priority_updates_total: i.priority_updates_total,
-        ignored_updates_total: i.ignored_updates_total,
-        rejections_total: i.rejections_total.into_iter().collect(),
-        rate_limiter: i.rate_limiter.map(|r| pb::RateLimiterInfo {
-            min_size_to_sample: r.min_size_to_sample,
-            samples_per_insert: r.samples_per_insert,
-            error_tolerance: r.error_tolerance,
-            can_sample: r.can_sample,
-            can_insert: r.can_insert,
-            sample_waits_total: r.sample_waits_total,
-            insert_waits_total: r.insert_waits_total,
-        }),
-        bytes_stored: i.bytes_stored,
-        last_snapshot_unix_ms: i.last_snapshot_unix_ms,
-    }
+    table_info!(i => pb::TableInfo, pb::RateLimiterInfo)
 }
 
 /// A table's description from the wire.
 pub fn table_info_from_wire(i: pb::TableInfo) -> TableInfo {
-    TableInfo {
-        name: i.name,
-        size: i.size,
-        capacity: i.capacity,
-        inserts_total: i.inserts_total,
-        samples_total: i.samples_total,
-        priority_updates_total: i.priority_updates_total,
-        ignored_updates_total: i.ignored_updates_total,
-        rejections_total: i.rejections_total.into_iter().collect(),
-        rate_limiter: i.rate_limiter.map(|r| RateLimiterInfo {
-            min_size_to_sample: r.min_size_to_sample,
-            samples_per_insert: r.samples_per_insert,
-            error_tolerance: r.error_tolerance,
-            can_sample: r.can_sample,
-            can_insert: r.can_insert,
-            sample_waits_total: r.sample_waits_total,
-            insert_waits_total: r.insert_waits_total,
-        }),
-        bytes_stored: i.bytes_stored,
-        last_snapshot_unix_ms: i.last_snapshot_unix_ms,
-    }
+    table_info!(i => TableInfo, RateLimiterInfo)
 }
 
 #[cfg(test)]

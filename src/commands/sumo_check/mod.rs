@@ -66,6 +66,14 @@ pub struct Plan {
     pub policies: Vec<PolicySpec>,
 }
 
+/// Trials of every policy of every plan (one simulator's share of a check).
+fn total_trials(plans: &[Plan]) -> u64 {
+    plans
+        .iter()
+        .map(|p| p.policies.len() as u64 * p.trials)
+        .sum()
+}
+
 /// One SUMO trial as `check.py` writes it.
 #[derive(Debug, Deserialize)]
 struct SumoTrial {
@@ -109,11 +117,7 @@ pub fn run(args: &SumoCheckArgs) -> anyhow::Result<ExitCode> {
     let work = work_dir(args.work.as_deref())?;
 
     // Ours first: quick, and it catches a bad scenario before SUMO starts.
-    let total: u64 = plans
-        .iter()
-        .map(|p| p.policies.len() as u64 * p.trials)
-        .sum();
-    let bar = progress::bar(total, "trials");
+    let bar = progress::bar(total_trials(&plans), "trials");
     bar.set_message("ours");
     let mut ours: BTreeMap<String, Vec<EvalReport>> = BTreeMap::new();
     for plan in &plans {
@@ -345,11 +349,7 @@ fn run_sumo(
     script: &Path,
     work: &Path,
 ) -> anyhow::Result<(String, BTreeMap<String, Vec<SumoTrial>>)> {
-    let total: u64 = plans
-        .iter()
-        .map(|p| p.policies.len() as u64 * p.trials)
-        .sum();
-    let bar = progress::bar(total, "SUMO trials");
+    let bar = progress::bar(total_trials(plans), "SUMO trials");
     bar.set_message("SUMO");
     let jobs = args.jobs.max(1);
     // Popped from the back: the longest runs (60 s occlusion episodes,
