@@ -329,6 +329,22 @@ fn the_learner_killed_at_random_moments_restarts_from_a_whole_checkpoint_above_e
     );
 }
 
+/// The settings of the tests that run a whole small training (every role
+/// takes all of them): the sequential action set, a tiny network trained on
+/// small batches and published often, the `faults` table.
+const SMALL_RUN: [&str; 10] = [
+    "--set",
+    "sim.action_set=sequential",
+    "--set",
+    "learner.hidden=[32]",
+    "--set",
+    "replay.table=faults",
+    "--set",
+    "learner.batch_size=16",
+    "--set",
+    "learner.publish_every=5",
+];
+
 /// An actor of the actor test: index `index` of 2, pushing and following
 /// weights over `transport` (shm or grpc), its metrics on a free port.
 /// `common` are the run's settings.
@@ -378,17 +394,10 @@ fn actors_killed_at_random_moments_leave_the_replay_and_the_learner_training() {
         std::process::id()
     );
     let common = [
-        "--set",
-        &prefix,
-        "--set",
-        "sim.action_set=sequential",
-        "--set",
-        "learner.hidden=[32]",
-        "--set",
-        "replay.table=faults",
-        "--set",
-        "replay.min_size_to_sample=200",
-    ];
+        &SMALL_RUN[..],
+        &["--set", &prefix, "--set", "replay.min_size_to_sample=200"],
+    ]
+    .concat();
     // Shared memory on: one actor writes into the replay's memory and
     // reads the learner's, and is killed in the middle of it.
     let replay = Proc::spawn(
@@ -417,10 +426,6 @@ fn actors_killed_at_random_moments_leave_the_replay_and_the_learner_training() {
         &[
             &common[..],
             &[
-                "--set",
-                "learner.batch_size=16",
-                "--set",
-                "learner.publish_every=5",
                 "learner",
                 "--listen",
                 "127.0.0.1:0",
@@ -878,18 +883,11 @@ fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts(
     let _enter = rt.enter();
     let host = format!("{}.1", ns.prefix);
     let with_common = |extra: &[&str]| -> Vec<String> {
-        [
-            "--set",
-            "sim.action_set=sequential",
-            "--set",
-            "learner.hidden=[32]",
-            "--set",
-            "replay.table=faults",
-        ]
-        .iter()
-        .chain(extra)
-        .map(|s| (*s).to_owned())
-        .collect()
+        SMALL_RUN
+            .iter()
+            .chain(extra)
+            .map(|s| (*s).to_owned())
+            .collect()
     };
     let port_of = |addr: &str| -> u16 {
         addr.rsplit(':')
@@ -913,10 +911,6 @@ fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts(
     let replay_addr = replay.addr("replay server listening");
     let replay_url = format!("http://{replay_addr}");
     let learner = Proc::spawn(&with_common(&[
-        "--set",
-        "learner.batch_size=16",
-        "--set",
-        "learner.publish_every=5",
         "learner",
         "--listen",
         &listen,
