@@ -16,30 +16,11 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 use crossroads_common::Shutdown;
-use crossroads_config::WeightNormalization;
 use crossroads_fuzz::seeds;
-use crossroads_replay::rate_limiter::RateLimiterConfig;
 use crossroads_replay::snapshot::{self, decode, encode};
-use crossroads_replay::{PreparedBatch, Table, TableConfig, TableImage, TableMetrics};
+use crossroads_replay::{PreparedBatch, TableImage};
 use crossroads_types::ValidBatch;
 use libfuzzer_sys::fuzz_target;
-
-fn table() -> Table {
-    let config = TableConfig {
-        name: "t".to_owned(),
-        capacity: 16,
-        alpha: 0.6,
-        min_priority: 1e-6,
-        normalization: WeightNormalization::Table,
-        seed: 7,
-        limiter: RateLimiterConfig {
-            min_size_to_sample: 1,
-            samples_per_insert: 0.0,
-            tolerance: 0.0,
-        },
-    };
-    Table::new(config, TableMetrics::unregistered("t"))
-}
 
 fn runtime() -> &'static tokio::runtime::Runtime {
     static RT: OnceLock<tokio::runtime::Runtime> = OnceLock::new();
@@ -73,7 +54,7 @@ fuzz_target!(|data: &[u8]| {
 
     let shutdown = Shutdown::new();
     for (_, image) in decoded.iter().take(4) {
-        let t = table();
+        let t = seeds::small_table(16);
         let batch = PreparedBatch::new(seeds::dense_batch());
         t.insert_now(&batch).expect("a valid batch");
         let before = file_of(&t.image());
@@ -86,7 +67,7 @@ fuzz_target!(|data: &[u8]| {
             continue;
         }
         let restored = t.image();
-        let fresh = table();
+        let fresh = seeds::small_table(16);
         fresh
             .restore(&restored)
             .expect("a table's own image restores");

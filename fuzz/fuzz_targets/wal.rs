@@ -12,28 +12,10 @@
 //! its image, and inserts into an empty table.
 #![no_main]
 
-use crossroads_config::WeightNormalization;
-use crossroads_replay::rate_limiter::RateLimiterConfig;
+use crossroads_fuzz::seeds;
+use crossroads_replay::PreparedBatch;
 use crossroads_replay::wal;
-use crossroads_replay::{PreparedBatch, Table, TableConfig, TableMetrics};
 use libfuzzer_sys::fuzz_target;
-
-fn empty_table() -> Table {
-    let config = TableConfig {
-        name: "t".to_owned(),
-        capacity: 64,
-        alpha: 0.6,
-        min_priority: 1e-6,
-        normalization: WeightNormalization::Table,
-        seed: 1,
-        limiter: RateLimiterConfig {
-            min_size_to_sample: 1,
-            samples_per_insert: 0.0,
-            tolerance: 0.0,
-        },
-    };
-    Table::new(config, TableMetrics::unregistered("t"))
-}
 
 fn encode(records: &[(String, crossroads_replay::TableImage)]) -> Vec<u8> {
     let mut out = wal::segment_header().to_vec();
@@ -81,7 +63,7 @@ fuzz_target!(|data: &[u8]| {
             encode(&[("t".to_owned(), same.to_image(key))]),
             encode(&[("t".to_owned(), image)])
         );
-        empty_table()
+        seeds::small_table(64)
             .insert_now(&batch)
             .expect("a checked batch inserts");
     }

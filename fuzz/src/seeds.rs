@@ -217,10 +217,13 @@ fn checkpoint() -> Vec<Seed> {
     ]
 }
 
-fn snapshot() -> Vec<Seed> {
+/// An empty table `t` of `capacity` items that samples as soon as it
+/// holds one (no rate limit): the table the snapshot and write-ahead-log
+/// targets and their seeds restore into.
+pub fn small_table(capacity: usize) -> Table {
     let config = TableConfig {
         name: "t".to_owned(),
-        capacity: 8,
+        capacity,
         alpha: 0.6,
         min_priority: 1e-6,
         normalization: WeightNormalization::Table,
@@ -231,7 +234,11 @@ fn snapshot() -> Vec<Seed> {
             tolerance: 0.0,
         },
     };
-    let table = Table::new(config, TableMetrics::unregistered("t"));
+    Table::new(config, TableMetrics::unregistered("t"))
+}
+
+fn snapshot() -> Vec<Seed> {
+    let table = small_table(8);
     for b in [dense_batch(), dense_batch()] {
         table
             .insert_now(&PreparedBatch::new(b))
