@@ -458,6 +458,21 @@ fn path(p: &'static str) -> tonic::codegen::http::uri::PathAndQuery {
     tonic::codegen::http::uri::PathAndQuery::from_static(p)
 }
 
+/// The status a streaming call ends with when its request is refused:
+/// either at once or as the first message of the response stream.
+async fn stream_refusal<M: std::fmt::Debug>(
+    result: Result<tonic::Response<tonic::codec::Streaming<M>>, tonic::Status>,
+) -> tonic::Status {
+    match result {
+        Err(status) => status,
+        Ok(response) => response
+            .into_inner()
+            .message()
+            .await
+            .expect_err("garbage is refused"),
+    }
+}
+
 fn assert_undecodable(status: &tonic::Status, message: &str) {
     assert_eq!(status.code(), Code::InvalidArgument, "{status:?}");
     assert!(
@@ -494,21 +509,15 @@ async fn bytes_that_are_not_protobuf_are_invalid_argument_on_both_servers() {
     assert_undecodable(&status, "SampleRequest");
     grpc.ready().await.expect("connected");
     let outgoing = tokio_stream::iter([GARBAGE.to_vec()]);
-    let status = match grpc
-        .streaming(
+    let status = stream_refusal(
+        grpc.streaming(
             tonic::Request::new(outgoing),
             path("/crossroads.v1.Replay/Insert"),
             RawBytes,
         )
-        .await
-    {
-        Err(status) => status,
-        Ok(response) => response
-            .into_inner()
-            .message()
-            .await
-            .expect_err("garbage is refused"),
-    };
+        .await,
+    )
+    .await;
     assert_undecodable(&status, "InsertRequest");
     let mut transport = config.transport.clone();
     transport.replay_endpoint = format!("http://{}", replay.server.local_addr());
@@ -531,21 +540,15 @@ async fn bytes_that_are_not_protobuf_are_invalid_argument_on_both_servers() {
         .expect_err("garbage is refused");
     assert_undecodable(&status, "StatusRequest");
     grpc.ready().await.expect("connected");
-    let status = match grpc
-        .server_streaming(
+    let status = stream_refusal(
+        grpc.server_streaming(
             tonic::Request::new(GARBAGE.to_vec()),
             path("/crossroads.v1.Learner/SubscribeWeights"),
             RawBytes,
         )
-        .await
-    {
-        Err(status) => status,
-        Ok(response) => response
-            .into_inner()
-            .message()
-            .await
-            .expect_err("garbage is refused"),
-    };
+        .await,
+    )
+    .await;
     assert_undecodable(&status, "SubscribeWeightsRequest");
     client(&learner, None)
         .status()
