@@ -167,10 +167,8 @@ impl Trainer {
         }
 
         // Optimizer step, the gradient clipped by its global norm.
-        self.optimizer.zero_grad();
-        loss.backward();
-        let grad_norm = self.optimizer.clip_grad_norm(c.max_grad_norm);
-        self.optimizer.step();
+        let grads = self.optimizer.gradients(&loss)?;
+        let grad_norm = self.optimizer.step(&grads, c.max_grad_norm)?;
         self.step += 1;
 
         // New priorities from the TD errors before the step.

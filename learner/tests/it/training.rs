@@ -67,10 +67,8 @@ fn rmsprop_and_adam_follow_their_update_rules() {
     let run = |config: OptimizerConfig| {
         let p = Tensor::from_slice(&[1.0f32]).set_requires_grad(true);
         let mut opt = Optimizer::new(config, vec![("p".to_owned(), p.shallow_clone())]);
-        opt.zero_grad();
-        (&p * 2.0).sum(Kind::Float).backward();
-        let norm = opt.clip_grad_norm(0.0);
-        opt.step();
+        let grads = opt.gradients(&(&p * 2.0).sum(Kind::Float)).unwrap();
+        let norm = opt.step(&grads, 0.0).unwrap();
         (values(&p.detach())[0], norm)
     };
     let (p, norm) = run(OptimizerConfig::Rmsprop {
@@ -94,21 +92,79 @@ fn rmsprop_and_adam_follow_their_update_rules() {
 #[test]
 fn clipping_scales_the_gradient_to_the_limit() {
     let p = Tensor::from_slice(&[1.0f32, 1.0]).set_requires_grad(true);
+    let (lr, decay, eps) = (0.1f32, 0.9f32, 0.01f32);
     let mut opt = Optimizer::new(
         OptimizerConfig::Rmsprop {
-            lr: 0.1,
-            decay: 0.9,
-            eps: 0.01,
+            lr: lr.into(),
+            decay: decay.into(),
+            eps: eps.into(),
         },
         vec![("p".to_owned(), p.shallow_clone())],
     );
-    opt.zero_grad();
-    (&p * Tensor::from_slice(&[3.0f32, 4.0]))
-        .sum(Kind::Float)
-        .backward();
-    let norm = opt.clip_grad_norm(1.0);
+    let loss = (&p * Tensor::from_slice(&[3.0f32, 4.0])).sum(Kind::Float);
+    let grads = opt.gradients(&loss).unwrap();
+    close(&values(&grads[0]), &[3.0, 4.0], 0.0);
+    let norm = opt.step(&grads, 1.0).unwrap();
     assert!((norm - 5.0).abs() < 1e-6);
-    close(&values(&p.grad()), &[0.6, 0.8], 1e-5);
+    // The step used the gradient scaled to norm 1: (0.6, 0.8).
+    let moved: Vec<f32> = [0.6f32, 0.8]
+        .iter()
+        .map(|g| 1.0 - lr * g / (((1.0 - decay) * g * g).sqrt() + eps))
+        .collect();
+    close(&values(&p.detach()), &moved, 1e-5);
+}
+
+#[test]
+fn the_fused_step_matches_the_rule_as_tensor_operations() {
+    // Three steps of each optimizer on a parameter of mixed signs and
+    // magnitudes, against the same rule written with tch operations.
+    let g_of =
+        |t: usize| Tensor::from_slice(&[0.5f32, -2.0, 1e-3, 3.0, -0.25, 0.0]) * (1.0 + t as f64);
+    for config in [
+        OptimizerConfig::Rmsprop {
+            lr: 0.01,
+            decay: 0.95,
+            eps: 0.01,
+        },
+        OptimizerConfig::Adam {
+            lr: 0.001,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+    ] {
+        let p = Tensor::from_slice(&[1.0f32, -1.0, 0.5, 2.0, 0.0, 3.0]).set_requires_grad(true);
+        let mut opt = Optimizer::new(config, vec![("p".to_owned(), p.shallow_clone())]);
+        let mut want = Tensor::from_slice(&[1.0f32, -1.0, 0.5, 2.0, 0.0, 3.0]);
+        let (mut s1, mut s2) = (want.zeros_like(), want.zeros_like());
+        for t in 1..=3 {
+            let g = g_of(t);
+            let grads = opt.gradients(&(&p * &g).sum(Kind::Float)).unwrap();
+            opt.step(&grads, 0.0).unwrap();
+            want = match config {
+                OptimizerConfig::Rmsprop { lr, decay, eps } => {
+                    s1 = &s1 * decay + g.square() * (1.0 - decay);
+                    &want - &g * lr / (s1.sqrt() + eps)
+                }
+                OptimizerConfig::Adam {
+                    lr,
+                    beta1,
+                    beta2,
+                    eps,
+                } => {
+                    s1 = &s1 * beta1 + &g * (1.0 - beta1);
+                    s2 = &s2 * beta2 + g.square() * (1.0 - beta2);
+                    let v_hat = &s2 / (1.0 - beta2.powi(t as i32));
+                    &want - &s1 * (lr / (1.0 - beta1.powi(t as i32))) / (v_hat.sqrt() + eps)
+                }
+            };
+        }
+        close(&values(&p.detach()), &values(&want), 1e-5);
+        let (state, steps) = opt.state();
+        assert_eq!(steps, 3);
+        assert_eq!(state.len(), if config.name() == "adam" { 2 } else { 1 });
+        close(&values(&state[0].1), &values(&s1), 1e-5);
+    }
 }
 
 /// A deterministic semi-MDP over three states, with multi-step actions
