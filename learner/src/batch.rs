@@ -1,26 +1,27 @@
 //! [`TrainingBatch`]: a sampled batch as the tensors an update needs,
 //! checked against the network at the boundary.
 
-use crossroads_model::NetworkSpec;
+use crossroads_model::{NetworkSpec, Observations};
 use crossroads_types::{Sample, TransitionBatch};
 use tch::Tensor;
 
 use crate::LearnerError;
 
-/// Dense tensors of one batch, in batch order, with the replay keys the
+/// The tensors of one batch, in batch order, with the replay keys the
 /// priority update names.
 #[derive(Debug)]
 pub struct TrainingBatch {
-    /// States, `[batch, input]` f32.
-    pub obs: Tensor,
+    /// States, `[batch, input]` f32, in the form the network reads fastest
+    /// (sparse for an MLP trunk).
+    pub obs: Observations,
     /// Actions taken, `[batch]` i64.
     pub actions: Tensor,
     /// Discounted rewards over each transition's steps, `[batch]`.
     pub rewards: Tensor,
     /// Bootstrap discounts gamma^k (0 at terminal), `[batch]`.
     pub discounts: Tensor,
-    /// Next states, `[batch, input]`.
-    pub next_obs: Tensor,
+    /// Next states, `[batch, input]`, like `obs`.
+    pub next_obs: Observations,
     /// Importance weights, `[batch]`.
     pub weights: Tensor,
     /// Replay keys, for the priority update.
@@ -144,13 +145,12 @@ impl TrainingBatch {
             .iter()
             .map(|&a| i64::from(a))
             .collect();
-        let shape = [n as i64, input as i64];
         Ok(Self {
-            obs: Tensor::from_slice(&obs).reshape(shape),
+            obs: Observations::new(spec, &obs, n),
             actions: Tensor::from_slice(&actions),
             rewards: Tensor::from_slice(&batch.columns.rewards),
             discounts: Tensor::from_slice(&batch.columns.discounts),
-            next_obs: Tensor::from_slice(&next).reshape(shape),
+            next_obs: Observations::new(spec, &next, n),
             weights: Tensor::from_slice(weights),
             keys,
         })

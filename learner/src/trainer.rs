@@ -87,7 +87,7 @@ impl Trainer {
         let online = QNetwork::new(config.spec.clone(), config.seed)?;
         let mut target = QNetwork::new(config.spec.clone(), config.seed)?;
         target.copy_from(&online)?;
-        let optimizer = Optimizer::new(config.optimizer, online.named_variables());
+        let optimizer = Optimizer::new(config.optimizer, online.parameters());
         Ok(Self {
             config,
             online,
@@ -130,8 +130,9 @@ impl Trainer {
         online.load_safetensors(&state.online)?;
         let mut target = QNetwork::new(self.config.spec.clone(), 0)?;
         target.load_safetensors(&state.target)?;
-        let mut optimizer = Optimizer::new(self.config.optimizer, online.named_variables());
-        optimizer.load_state(state.optimizer, state.optimizer_steps)?;
+        let mut optimizer = Optimizer::new(self.config.optimizer, online.parameters());
+        let slots = relayout_slots(&online, state.optimizer);
+        optimizer.load_state(slots, state.optimizer_steps)?;
         self.online = online;
         self.target = target;
         self.optimizer = optimizer;
@@ -145,8 +146,8 @@ impl Trainer {
 
         // Targets, without gradients: double DQN over the n-step return.
         let targets = tch::no_grad(|| -> Result<Tensor, LearnerError> {
-            let q_online_next = self.online.q_values(&batch.next_obs)?;
-            let q_target_next = self.target.q_values(&batch.next_obs)?;
+            let q_online_next = self.online.q_values_of(&batch.next_obs)?;
+            let q_target_next = self.target.q_values_of(&batch.next_obs)?;
             Ok(double_dqn_targets(
                 &q_online_next,
                 &q_target_next,
@@ -156,7 +157,7 @@ impl Trainer {
         })?;
 
         // Loss: Huber on the TD errors, weighted by importance.
-        let q_sa = taken(&self.online.q_values(&batch.obs)?, &batch.actions);
+        let q_sa = taken(&self.online.q_values_of(&batch.obs)?, &batch.actions);
         let loss = weighted_huber(&q_sa, &targets, &batch.weights, c.huber_delta);
         let loss_value = loss.double_value(&[]);
         if !loss_value.is_finite() {
@@ -200,6 +201,7 @@ impl Trainer {
     /// The training state as a checkpoint stores it.
     pub fn state(&self, version: u64) -> Result<TrainerState, LearnerError> {
         let (optimizer, optimizer_steps) = self.optimizer.state();
+        let optimizer = relayout_slots(&self.online, optimizer);
         Ok(TrainerState {
             online: self.online.to_safetensors(version)?,
             target: self.target.to_safetensors(version)?,
@@ -208,6 +210,21 @@ impl Trainer {
             step: self.step,
         })
     }
+}
+
+/// Optimizer state tensors (`<slot>.<variable>`) turned between the
+/// network's stored layout and the weights file's, so a checkpoint's
+/// optimizer state has the shapes of its weights (see
+/// [`QNetwork::file_layout`]).
+fn relayout_slots(net: &QNetwork, slots: Vec<(String, Tensor)>) -> Vec<(String, Tensor)> {
+    slots
+        .into_iter()
+        .map(|(name, t)| {
+            let variable = name.split_once('.').map_or("", |(_, v)| v);
+            let t = net.file_layout(variable, t);
+            (name, t)
+        })
+        .collect()
 }
 
 /// Everything needed to continue training exactly: both networks (as

@@ -8,7 +8,10 @@
 //! tch-free and live in `crossroads_types`, re-exported here. [`QNetwork`] builds it with value V(s) and
 //! advantage A(s, a) heads combined as Q = V + A - mean(A) (Wang et al.
 //! 2016); [`QNetwork::infer`] is the batched inference actors call, and
-//! [`QNetwork::q_values`] the differentiable forward pass the learner trains.
+//! [`QNetwork::q_values`] the differentiable forward pass the learner trains;
+//! both read [`Observations`], sparse where the trunk's first layer can
+//! skip the zeros of a TTG observation (an MLP's: an embedding bag over its
+//! transposed weight).
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
 //! and PyTorch. [`network_spec`] is the network a run's `[sim]` and
@@ -17,6 +20,7 @@
 mod config;
 mod error;
 mod network;
+mod observations;
 pub mod weights;
 
 pub use config::network_spec;
@@ -26,4 +30,5 @@ pub use crossroads_types::spec::{
 };
 pub use error::ModelError;
 pub use network::{QBatch, QNetwork};
+pub use observations::{Observations, SparseRows};
 pub use weights::WeightsMeta;

@@ -5,12 +5,74 @@
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use crate::ModelError;
+use crate::observations::{Observations, SparseRows};
 use crate::spec::{NetworkSpec, TrunkKind};
 use crate::weights::{self, WeightsMeta};
 
+/// The variable an MLP trunk's first layer stores transposed.
+const FIRST_WEIGHT: &str = "trunk.0.weight";
+
+/// The first layer of an MLP trunk. Its weight is stored transposed,
+/// `[inputs, hidden]`, so that over sparse observations the layer is the
+/// sum of the (contiguous) rows of the non-zero inputs times their values:
+/// an embedding bag, 5-6x faster than the dense product on a TTG
+/// observation. Outside the network (safetensors, optimizer state) the
+/// weight has PyTorch's `[hidden, inputs]` layout; see
+/// [`QNetwork::file_layout`].
+struct FirstLayer {
+    weight_t: Tensor,
+    bias: Tensor,
+}
+
+impl FirstLayer {
+    /// Builds the layer under `path`, drawing the same initial values as
+    /// `nn::linear` (bias, then a Kaiming-uniform weight over the inputs).
+    fn new(path: nn::Path<'_>, inputs: i64, hidden: i64) -> Self {
+        let bound = 1.0 / (inputs as f64).sqrt();
+        let bias = path.var(
+            "bias",
+            &[hidden],
+            nn::Init::Uniform {
+                lo: -bound,
+                up: bound,
+            },
+        );
+        let weight = nn::init(
+            nn::init::DEFAULT_KAIMING_UNIFORM,
+            &[hidden, inputs],
+            Device::Cpu,
+        );
+        let weight_t = path.var_copy("weight", &weight.tr().contiguous());
+        Self { weight_t, bias }
+    }
+
+    fn forward(&self, obs: &Observations) -> Tensor {
+        match obs {
+            Observations::Dense(x) => self.bias.addmm(x, &self.weight_t),
+            Observations::Sparse(s) => {
+                let (sum, _, _, _) = Tensor::embedding_bag(
+                    &self.weight_t,
+                    &s.indices,
+                    &s.offsets,
+                    false,
+                    0, // sum
+                    false,
+                    Some(&s.values),
+                    false,
+                );
+                sum + &self.bias
+            }
+        }
+    }
+}
+
 /// The trunk's layers, as built.
 enum TrunkLayers {
-    Mlp(Vec<nn::Linear>),
+    /// `first` is `None` when the MLP has no hidden layer.
+    Mlp {
+        first: Option<FirstLayer>,
+        rest: Vec<nn::Linear>,
+    },
     Conv {
         convs: Vec<nn::Conv2D>,
         fc: nn::Linear,
@@ -107,13 +169,18 @@ impl QNetwork {
         let trunk_path = &root / "trunk";
         let (trunk, width) = match spec.trunk {
             TrunkKind::Mlp => {
-                let mut layers = Vec::with_capacity(spec.hidden.len());
                 let mut width = spec.input_len();
-                for (i, &h) in spec.hidden.iter().enumerate() {
-                    layers.push(nn::linear(&trunk_path / i, width, h, Default::default()));
+                let first = spec.hidden.first().map(|&h| {
+                    let layer = FirstLayer::new(&trunk_path / 0, width, h);
+                    width = h;
+                    layer
+                });
+                let mut rest = Vec::with_capacity(spec.hidden.len());
+                for (i, &h) in spec.hidden.iter().enumerate().skip(1) {
+                    rest.push(nn::linear(&trunk_path / i, width, h, Default::default()));
                     width = h;
                 }
-                (TrunkLayers::Mlp(layers), width)
+                (TrunkLayers::Mlp { first, rest }, width)
             }
             TrunkKind::Conv => {
                 let o = &spec.observation;
@@ -172,31 +239,84 @@ impl QNetwork {
             .sum::<usize>() as i64
     }
 
-    /// Every variable with its name, sorted by name.
+    /// Every variable with its name, sorted by name, in the layout of the
+    /// weights file (PyTorch's: the first MLP weight `[hidden, inputs]`).
+    /// The tensors share memory with the variables.
     pub fn named_variables(&self) -> Vec<(String, Tensor)> {
+        self.parameters()
+            .into_iter()
+            .map(|(name, t)| {
+                let t = self.file_layout(&name, t);
+                (name, t)
+            })
+            .collect()
+    }
+
+    /// Every variable with its name, sorted by name, as stored (what an
+    /// optimizer updates in place; see [`QNetwork::file_layout`]).
+    pub fn parameters(&self) -> Vec<(String, Tensor)> {
         let mut v: Vec<_> = self.vs.variables().into_iter().collect();
         v.sort_by(|a, b| a.0.cmp(&b.0));
         v
+    }
+
+    /// Whether the first layer reads [`Observations::Sparse`] without
+    /// densifying them (an MLP trunk with a hidden layer).
+    fn reads_sparse(&self) -> bool {
+        matches!(&self.trunk, TrunkLayers::Mlp { first: Some(_), .. })
+    }
+
+    /// Turns a tensor shaped like variable `name` between the layout the
+    /// network stores it in and the weights file's (the same operation
+    /// both ways): the first weight of an MLP trunk is stored transposed,
+    /// `[inputs, hidden]`, for its sparse forward pass; every other
+    /// variable is the same in both. For tensors that follow a variable's
+    /// shape, such as an optimizer's state.
+    pub fn file_layout(&self, name: &str, t: Tensor) -> Tensor {
+        if self.reads_sparse() && name == FIRST_WEIGHT {
+            t.tr()
+        } else {
+            t
+        }
     }
 
     /// Q-values `[batch, num_actions]` for observations `[batch, input]`
     /// (f32). Records the graph for backpropagation unless called under
     /// `tch::no_grad`.
     pub fn q_values(&self, obs: &Tensor) -> Result<Tensor, ModelError> {
+        self.q_values_of(&Observations::Dense(obs.shallow_clone()))
+    }
+
+    /// [`QNetwork::q_values`] of observations in either form (see
+    /// [`Observations::new`] for the fast one).
+    pub fn q_values_of(&self, obs: &Observations) -> Result<Tensor, ModelError> {
         self.check_input(obs)?;
         Ok(self.forward(obs))
     }
 
-    fn check_input(&self, obs: &Tensor) -> Result<(), ModelError> {
-        let size = obs.size();
-        if size.len() != 2 || size[1] != self.spec.input_len() {
-            return Err(ModelError::Shape {
-                expected: self.spec.input_len(),
-                got: size,
-            });
-        }
-        if obs.kind() != Kind::Float {
-            return Err(ModelError::Kind(obs.kind()));
+    fn check_input(&self, obs: &Observations) -> Result<(), ModelError> {
+        let input = self.spec.input_len();
+        match obs {
+            Observations::Dense(x) => {
+                let size = x.size();
+                if size.len() != 2 || size[1] != input {
+                    return Err(ModelError::Shape {
+                        expected: input,
+                        got: size,
+                    });
+                }
+                if x.kind() != Kind::Float {
+                    return Err(ModelError::Kind(x.kind()));
+                }
+            }
+            Observations::Sparse(s) => {
+                if s.width != input {
+                    return Err(ModelError::Shape {
+                        expected: input,
+                        got: vec![s.rows, s.width],
+                    });
+                }
+            }
         }
         Ok(())
     }
@@ -204,12 +324,13 @@ impl QNetwork {
     /// The two streams before they are combined: V(s) `[batch, 1]` and
     /// A(s, a) `[batch, num_actions]`; Q = V + A - mean_a A.
     pub fn streams(&self, obs: &Tensor) -> Result<(Tensor, Tensor), ModelError> {
-        self.check_input(obs)?;
-        let h = self.trunk_features(obs);
+        let obs = Observations::Dense(obs.shallow_clone());
+        self.check_input(&obs)?;
+        let h = self.trunk_features(&obs);
         Ok((self.value.forward(&h), self.advantage.forward(&h)))
     }
 
-    fn forward(&self, obs: &Tensor) -> Tensor {
+    fn forward(&self, obs: &Observations) -> Tensor {
         let h = self.trunk_features(obs);
         let value = self.value.forward(&h);
         let advantage = self.advantage.forward(&h);
@@ -217,12 +338,17 @@ impl QNetwork {
         value + advantage - mean
     }
 
-    fn trunk_features(&self, obs: &Tensor) -> Tensor {
+    fn trunk_features(&self, obs: &Observations) -> Tensor {
         match &self.trunk {
-            TrunkLayers::Mlp(layers) => layers
-                .iter()
-                .fold(obs.shallow_clone(), |h, l| l.forward(&h).relu()),
+            TrunkLayers::Mlp { first, rest } => {
+                let h = match first {
+                    Some(first) => first.forward(obs).relu(),
+                    None => obs.to_dense(),
+                };
+                rest.iter().fold(h, |h, l| l.forward(&h).relu())
+            }
             TrunkLayers::Conv { convs, fc } => {
+                let obs = obs.to_dense();
                 let o = &self.spec.observation;
                 let batch = obs.size()[0];
                 let grid = obs
@@ -243,8 +369,10 @@ impl QNetwork {
     }
 
     /// Batched inference for actors: `obs` holds `batch` flat observations
-    /// back to back; returns their Q-values. Runs without recording a graph.
-    /// Fails on a wrong length and on NaN or infinite input.
+    /// back to back; returns their Q-values. Runs without recording a graph,
+    /// over the non-zero values only where the trunk allows
+    /// ([`Observations::new`]). Fails on a wrong length and on NaN or
+    /// infinite input.
     pub fn infer(&self, obs: &[f32], batch: usize) -> Result<QBatch, ModelError> {
         let input = self.spec.input_len() as usize;
         if batch == 0 || obs.len() != batch * input {
@@ -253,14 +381,19 @@ impl QNetwork {
                 got: vec![batch as i64, obs.len() as i64 / batch.max(1) as i64],
             });
         }
-        if let Some(i) = obs.iter().position(|v| !v.is_finite()) {
-            return Err(ModelError::NonFinite(format!(
-                "observation {} value {}",
-                i / input,
-                i % input
-            )));
-        }
-        let x = Tensor::from_slice(obs).reshape([batch as i64, input as i64]);
+        let non_finite = |i: usize| {
+            ModelError::NonFinite(format!("observation {} value {}", i / input, i % input))
+        };
+        let x = if self.reads_sparse() {
+            Observations::Sparse(
+                SparseRows::from_finite(obs, batch, input).map_err(|(i, _)| non_finite(i))?,
+            )
+        } else {
+            if let Some(i) = obs.iter().position(|v| !v.is_finite()) {
+                return Err(non_finite(i));
+            }
+            Observations::new(&self.spec, obs, batch)
+        };
         let q = tch::no_grad(|| self.forward(&x));
         let q = Vec::<f32>::try_from(q.flatten(0, -1))?;
         Ok(QBatch {
@@ -343,6 +476,10 @@ impl QNetwork {
     /// each variable once with its shape and hold finite values. All or
     /// nothing.
     pub fn assign(&mut self, tensors: Vec<(String, Tensor)>) -> Result<(), ModelError> {
-        weights::assign(&self.vs.variables(), tensors)
+        let vars = self
+            .named_variables()
+            .into_iter()
+            .collect::<std::collections::HashMap<_, _>>();
+        weights::assign(&vars, tensors)
     }
 }

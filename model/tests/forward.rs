@@ -1,10 +1,14 @@
 //! A forward pass through libtorch on CPU with known weights.
 
-use crossroads_model::{NetworkSpec, ObservationLayout, QNetwork, TrunkKind};
-use tch::{Device, Kind, Tensor, nn};
+use crossroads_model::{
+    NetworkSpec, ObservationLayout, Observations, QNetwork, TrunkKind, weights,
+};
+use tch::{Device, Kind, Tensor};
 
-fn set(vs: &nn::VarStore, name: &str, values: &[f32], shape: &[i64]) {
-    let vars = vs.variables();
+/// Sets variable `name` to `values` in the weights file's layout (PyTorch's:
+/// a linear weight is `[out, in]`), through the network's views.
+fn set(net: &QNetwork, name: &str, values: &[f32], shape: &[i64]) {
+    let vars: std::collections::HashMap<_, _> = net.named_variables().into_iter().collect();
     let var = vars
         .get(name)
         .unwrap_or_else(|| panic!("no variable {name}; have {:?}", vars.keys()));
@@ -34,22 +38,21 @@ fn plain_mlp(inputs: i64, hidden: Vec<i64>, num_actions: i64) -> NetworkSpec {
 #[test]
 fn dueling_forward_matches_hand_computation() {
     let net = QNetwork::new(plain_mlp(2, vec![2], 3), 0).expect("valid spec");
-    let vs = net.var_store();
 
     // trunk: h = relu(W x + b) with W = [[1, 2], [-1, 1]], b = [0, 0.5]
-    set(vs, "trunk.0.weight", &[1.0, 2.0, -1.0, 1.0], &[2, 2]);
-    set(vs, "trunk.0.bias", &[0.0, 0.5], &[2]);
+    set(&net, "trunk.0.weight", &[1.0, 2.0, -1.0, 1.0], &[2, 2]);
+    set(&net, "trunk.0.bias", &[0.0, 0.5], &[2]);
     // value: V = [0.5, -1] . h + 1
-    set(vs, "value.weight", &[0.5, -1.0], &[1, 2]);
-    set(vs, "value.bias", &[1.0], &[1]);
+    set(&net, "value.weight", &[0.5, -1.0], &[1, 2]);
+    set(&net, "value.bias", &[1.0], &[1]);
     // advantage: A = [[1, 0], [0, 1], [1, 1]] h + [0, 0, -3]
     set(
-        vs,
+        &net,
         "advantage.weight",
         &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0],
         &[3, 2],
     );
-    set(vs, "advantage.bias", &[0.0, 0.0, -3.0], &[3]);
+    set(&net, "advantage.bias", &[0.0, 0.0, -3.0], &[3]);
 
     // x = [1, 1]:  h = relu([3, 0.5]) = [3, 0.5]; V = 1.5 - 0.5 + 1 = 2
     //   A = [3, 0.5, 0.5], mean 4/3; Q = 2 + A - 4/3 = [11/3, 7/6, 7/6]
@@ -310,4 +313,90 @@ mod qnetwork {
         target.copy_from(&online).unwrap();
         assert_eq!(dist(&online, &target), 0.0);
     }
+}
+
+/// Observations mostly zero (a row entirely), some negative values.
+fn sparse_rows(inputs: usize, rows: usize) -> Vec<f32> {
+    (0..rows * inputs)
+        .map(|i| {
+            let (r, c) = (i / inputs, i % inputs);
+            if r == 1 || (c * 7 + r) % 5 != 0 {
+                0.0
+            } else {
+                (c as f32 - 3.0) * 0.25
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn sparse_and_dense_observations_give_the_same_q_values_and_gradients() {
+    let net = QNetwork::new(plain_mlp(23, vec![8, 4], 3), 5).expect("valid spec");
+    let rows = 4;
+    let values = sparse_rows(23, rows);
+    let sparse = Observations::new(net.spec(), &values, rows);
+    assert!(matches!(sparse, Observations::Sparse(_)));
+    let dense = Tensor::from_slice(&values).reshape([rows as i64, 23]);
+    assert_eq!(
+        Vec::<f32>::try_from(sparse.to_dense().flatten(0, -1)).unwrap(),
+        values
+    );
+
+    let grads = |q: Tensor| {
+        let params: Vec<Tensor> = net.parameters().into_iter().map(|(_, t)| t).collect();
+        let loss = (&q * &q).sum(Kind::Float);
+        Tensor::run_backward(&[loss], &params, false, false)
+            .into_iter()
+            .map(|g| Vec::<f32>::try_from(g.flatten(0, -1)).unwrap())
+            .collect::<Vec<_>>()
+    };
+    let q_dense = net.q_values(&dense).unwrap();
+    let q_sparse = net.q_values_of(&sparse).unwrap();
+    let a: Vec<f32> = Vec::try_from(q_dense.flatten(0, -1)).unwrap();
+    let b: Vec<f32> = Vec::try_from(q_sparse.flatten(0, -1)).unwrap();
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() < 1e-5, "dense {a:?}, sparse {b:?}");
+    }
+    for (gd, gs) in grads(q_dense).iter().zip(grads(q_sparse)) {
+        for (x, y) in gd.iter().zip(&gs) {
+            assert!((x - y).abs() < 1e-4, "dense {gd:?}, sparse {gs:?}");
+        }
+    }
+    // The actors' call reads the same observations sparse.
+    let inferred = net.infer(&values, rows).unwrap();
+    for (x, y) in inferred.q.iter().zip(&a) {
+        assert!((x - y).abs() < 1e-5);
+    }
+}
+
+#[test]
+fn the_first_mlp_weight_keeps_pytorchs_layout_outside_the_network() {
+    let net = QNetwork::new(plain_mlp(23, vec![8], 3), 9).expect("valid spec");
+    // Stored transposed for the sparse pass ...
+    let stored: std::collections::HashMap<_, _> = net.parameters().into_iter().collect();
+    assert_eq!(stored["trunk.0.weight"].size(), vec![23, 8]);
+    // ... [out, in] in the file, and the file's values are the layer's.
+    let bytes = net.to_safetensors(1).unwrap();
+    let (_, tensors) = weights::decode(&bytes).unwrap();
+    let file: std::collections::HashMap<_, _> = tensors.into_iter().collect();
+    let w = &file["trunk.0.weight"];
+    assert_eq!(w.size(), vec![8, 23]);
+    let x = Tensor::from_slice(&sparse_rows(23, 3)).reshape([3, 23]);
+    let h = x.linear(w, Some(&file["trunk.0.bias"])).relu();
+    let v = h.linear(&file["value.weight"], Some(&file["value.bias"]));
+    let a = h.linear(&file["advantage.weight"], Some(&file["advantage.bias"]));
+    let q = &v + &a - a.mean_dim(1, true, Kind::Float);
+    let diff = (q - net.q_values(&x).unwrap())
+        .abs()
+        .max()
+        .double_value(&[]);
+    assert!(
+        diff < 1e-5,
+        "the file's weights give other Q-values: {diff}"
+    );
+    // The layout turn is its own inverse and leaves other variables alone.
+    let t = Tensor::zeros([8, 23], (Kind::Float, Device::Cpu));
+    assert_eq!(net.file_layout("trunk.0.weight", t).size(), vec![23, 8]);
+    let t = Tensor::zeros([1, 8], (Kind::Float, Device::Cpu));
+    assert_eq!(net.file_layout("value.weight", t).size(), vec![1, 8]);
 }

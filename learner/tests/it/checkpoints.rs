@@ -93,7 +93,7 @@ fn round_trip_gives_bit_identical_q_values_and_resume_is_exact() {
         let dir = tempfile::tempdir().unwrap();
         let store = CheckpointStore::open(dir.path(), 3, "success_rate").unwrap();
         let data = batches(10);
-        let x = data[0].obs.shallow_clone();
+        let x = data[0].obs.to_dense();
 
         let mut a = Trainer::new(config(optimizer)).unwrap();
         for b in &data[..6] {
