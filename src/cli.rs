@@ -868,9 +868,10 @@ pub enum BenchTarget {
         /// Batch sizes, comma-separated.
         #[arg(long, default_value = "64,256", value_delimiter = ',')]
         batch: Vec<u32>,
-        /// libtorch (and PyTorch) intra-op threads.
-        #[arg(long, default_value_t = 2)]
-        threads: usize,
+        /// libtorch (and PyTorch) intra-op threads [default:
+        /// runtime.torch_threads, 1].
+        #[arg(long)]
+        threads: Option<usize>,
         /// Timed rounds per measurement; the median is reported.
         #[arg(long, default_value_t = 5)]
         rounds: usize,

@@ -187,10 +187,10 @@ async fn act(
     } else {
         None
     };
-    let threads = config.runtime.compute_threads;
+    let threads = config.runtime.torch_threads();
     let acting = tokio::task::spawn_blocking(move || {
-        if threads > 0 {
-            tch::set_num_threads(threads as i32);
+        if let Some(n) = threads {
+            tch::set_num_threads(n as i32);
         }
         let report = actor.run(&mut network, pusher.as_ref(), &shutdown, max_steps);
         (report, pusher, network.version(), actor.settings().mode)

@@ -105,8 +105,8 @@ pub async fn start(
     let server = security.builder(LEARNER_OPEN_CALLS)?;
     let client_security = ClientSecurity::load(&config.transport)?;
     let spec = TrainerConfig::from_config(&config.sim, lc)?.spec;
-    if config.runtime.compute_threads > 0 {
-        tch::set_num_threads(config.runtime.compute_threads as i32);
+    if let Some(n) = config.runtime.torch_threads() {
+        tch::set_num_threads(n as i32);
     }
     let metrics = LearnerMetrics::new(registry)?;
     let store = open_store(lc)?;
@@ -242,14 +242,14 @@ async fn start_training(
     let (ready_tx, ready_rx) = oneshot::channel();
     let (done_tx, done_rx) = oneshot::channel();
     let thread_stop = stop.clone();
-    let threads = config.runtime.compute_threads;
+    let threads = config.runtime.torch_threads();
     std::thread::Builder::new()
         .name("learner".to_owned())
         .spawn(move || {
             // libtorch's OpenMP thread count is per calling thread; set it
             // on the thread that trains.
-            if threads > 0 {
-                tch::set_num_threads(threads as i32);
+            if let Some(n) = threads {
+                tch::set_num_threads(n as i32);
             }
             tracing::debug!(
                 torch_threads = tch::get_num_threads(),

@@ -43,7 +43,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Re
             config,
             &learner::Options {
                 batches: batch.clone(),
-                threads: *threads,
+                threads: threads.or(config.runtime.torch_threads()).unwrap_or(1),
                 rounds: *rounds,
                 seconds: *seconds,
                 fed_updates: *fed_updates,

@@ -115,8 +115,8 @@ fn default_experiment(global: &GlobalArgs) -> Option<crate::experiments::Experim
 /// Prints the report.
 pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::Result<ExitCode> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if config.runtime.compute_threads > 0 {
-        tch::set_num_threads(config.runtime.compute_threads as i32);
+    if let Some(n) = config.runtime.torch_threads() {
+        tch::set_num_threads(n as i32);
     }
     let (sim, spec) = network(config)?;
     let learner = &config.learner;

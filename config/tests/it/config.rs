@@ -48,6 +48,24 @@ fn file_values_override_defaults() {
 }
 
 #[test]
+fn networks_run_on_one_libtorch_thread_unless_told_otherwise() {
+    let (_f, result) = load("");
+    let config = result.expect("empty file");
+    assert_eq!(config.runtime.torch_threads(), Some(1));
+    let (_f, result) = load("[runtime]\ntorch_threads = 0\ncompute_threads = 3\n");
+    assert_eq!(result.expect("valid").runtime.torch_threads(), Some(3));
+    let (_f, result) = load("[runtime]\ntorch_threads = 0\n");
+    assert_eq!(
+        result.expect("valid").runtime.torch_threads(),
+        None,
+        "libtorch's own choice"
+    );
+    let (_f, result) = load("[runtime]\ntorch_threads = 4000\n");
+    let err = format!("{:#}", result.expect_err("out of range"));
+    assert!(err.contains("runtime.torch_threads"), "{err}");
+}
+
+#[test]
 fn unknown_key_names_file_and_key() {
     let (f, result) = load("[runtime]\nworker_thread = 3\n");
     let err = result.expect_err("unknown key");

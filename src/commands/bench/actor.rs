@@ -71,6 +71,9 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
         o.envs.iter().all(|&m| (1..=4096).contains(&m)),
         "--envs must each be between 1 and 4096"
     );
+    if let Some(n) = config.runtime.torch_threads() {
+        tch::set_num_threads(n as i32);
+    }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -187,7 +190,12 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
 
     let stop = Shutdown::new();
     let acting_stop = stop.clone();
+    let torch_threads = config.runtime.torch_threads();
     let acting = tokio::task::spawn_blocking(move || -> anyhow::Result<Sink> {
+        // As the actor process does: per thread, on the acting one.
+        if let Some(n) = torch_threads {
+            tch::set_num_threads(n as i32);
+        }
         while !acting_stop.is_triggered() {
             actor.step(&mut network)?;
             while let Some(batch) = actor.take_batch() {

@@ -109,7 +109,7 @@ async fn fed_runs(config: &Config, o: &Options) -> anyhow::Result<Vec<(u32, FedR
     c.replay.min_size_to_sample = 1;
     c.replay.samples_per_insert = 0.0;
     c.replay.capacity = 50_000;
-    c.runtime.compute_threads = o.threads;
+    c.runtime.torch_threads = o.threads;
     let shutdown = Shutdown::new();
     let server = crossroads_replay::start(&c, None, shutdown.clone())
         .await
