@@ -5,6 +5,7 @@
 //! bag with per-sample weights), which skips the zeros the dense product
 //! multiplies.
 
+use crossroads_types::codec;
 use tch::{Kind, Tensor};
 
 use crate::spec::{NetworkSpec, TrunkKind};
@@ -42,7 +43,8 @@ impl SparseRows {
     /// [`SparseRows::from_dense`], failing with the index of the first
     /// value that is NaN or infinite (and the rows anyway). One pass: the
     /// check costs nothing on the zeros, which are most of a TTG
-    /// observation and skipped 16 at a time.
+    /// observation and skipped 16 at a time
+    /// ([`codec::for_each_nonzero`]).
     pub fn from_finite(values: &[f32], rows: usize, width: usize) -> Result<Self, (usize, Self)> {
         assert_eq!(values.len(), rows * width, "rows * width values");
         let mut indices = Vec::new();
@@ -51,23 +53,13 @@ impl SparseRows {
         let mut bad = None;
         for (r, row) in values.chunks_exact(width.max(1)).take(rows).enumerate() {
             offsets.push(indices.len() as i64);
-            for (c, chunk) in row.chunks(16).enumerate() {
-                // All zero (either sign): no bit but the sign bits set. A
-                // fold without an early exit, so it vectorizes.
-                if chunk.iter().fold(0u32, |a, v| a | (v.to_bits() << 1)) == 0 {
-                    continue;
+            codec::for_each_nonzero(row, |i, v| {
+                if !v.is_finite() && bad.is_none() {
+                    bad = Some(r * width + i);
                 }
-                for (k, &v) in chunk.iter().enumerate() {
-                    if v != 0.0 {
-                        let i = c * 16 + k;
-                        if !v.is_finite() && bad.is_none() {
-                            bad = Some(r * width + i);
-                        }
-                        indices.push(i as i64);
-                        nonzero.push(v);
-                    }
-                }
-            }
+                indices.push(i as i64);
+                nonzero.push(v);
+            });
         }
         offsets.resize(rows, indices.len() as i64);
         let rows = Self {
