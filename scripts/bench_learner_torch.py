@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """The learner's update in PyTorch, for `crossroads bench learner`.
 
-The same network (dueling MLP: trunk of Linear+ReLU, value and advantage
-heads, Q = V + A - mean A), the same update (double-DQN targets under
+The same network (dueling: an MLP trunk of Linear+ReLU, or with --conv
+3x3 convolutions, stride 1 then 2, then one Linear over the maps and the
+extra features; value and advantage heads, Q = V + A - mean A), the same update (double-DQN targets under
 no_grad, Huber loss weighted by importance weights, global-norm gradient
 clipping, RMSprop or Adam, target copy every period) and the same kind of
 input (sparse grids of a few cars, batches built before timing), timed the
@@ -20,18 +21,42 @@ from torch import nn
 
 
 class Dueling(nn.Module):
-    def __init__(self, inputs, hidden, actions):
+    def __init__(self, inputs, hidden, actions, conv=None):
         super().__init__()
-        layers, width = [], inputs
-        for h in hidden:
-            layers += [nn.Linear(width, h), nn.ReLU()]
-            width = h
-        self.trunk = nn.Sequential(*layers)
+        self.conv = conv
+        if conv is None:
+            layers, width = [], inputs
+            for h in hidden:
+                layers += [nn.Linear(width, h), nn.ReLU()]
+                width = h
+            self.trunk = nn.Sequential(*layers)
+        else:
+            # Channels, rows, cols of the grid and the extra values after it.
+            c, rows, cols, self.extra = conv
+            layers = []
+            for i, out in enumerate(hidden[:-1]):
+                stride = 1 if i == 0 else 2
+                layers += [nn.Conv2d(c, out, 3, stride=stride, padding=1), nn.ReLU()]
+                c = out
+                rows, cols = (rows - 1) // stride + 1, (cols - 1) // stride + 1
+            self.maps = nn.Sequential(*layers)
+            self.fc = nn.Linear(c * rows * cols + self.extra, hidden[-1])
+            width = hidden[-1]
         self.value = nn.Linear(width, 1)
         self.advantage = nn.Linear(width, actions)
 
+    def features(self, x):
+        if self.conv is None:
+            return self.trunk(x)
+        c, rows, cols, extra = self.conv
+        grid = x[:, : c * rows * cols].reshape(-1, c, rows, cols)
+        maps = self.maps(grid).flatten(1)
+        if extra:
+            maps = torch.cat([maps, x[:, c * rows * cols :]], dim=1)
+        return torch.relu(self.fc(maps))
+
     def forward(self, x):
-        h = self.trunk(x)
+        h = self.features(x)
         a = self.advantage(h)
         return self.value(h) + a - a.mean(dim=1, keepdim=True)
 
@@ -60,6 +85,7 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("--input", type=int, default=2344)
     p.add_argument("--hidden", default="256,256")
+    p.add_argument("--conv", default="", help="C,ROWS,COLS,EXTRA: a conv trunk over that grid")
     p.add_argument("--actions", type=int, default=5)
     p.add_argument("--batch", default="64,256")
     p.add_argument("--threads", type=int, default=2)
@@ -78,10 +104,11 @@ def main():
     torch.set_num_threads(a.threads)
     torch.manual_seed(1)
     hidden = [int(h) for h in a.hidden.split(",")]
+    conv = tuple(int(v) for v in a.conv.split(",")) if a.conv else None
     results = {}
     for size in [int(b) for b in a.batch.split(",")]:
-        online = Dueling(a.input, hidden, a.actions)
-        target = Dueling(a.input, hidden, a.actions)
+        online = Dueling(a.input, hidden, a.actions, conv)
+        target = Dueling(a.input, hidden, a.actions, conv)
         target.load_state_dict(online.state_dict())
         if a.optimizer == "rmsprop":
             opt = torch.optim.RMSprop(

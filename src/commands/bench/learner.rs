@@ -60,9 +60,13 @@ fn pytorch(config: &Config, o: &Options) -> Result<serde_json::Value, String> {
     let spec = TrainerConfig::from_config(&config.sim, &config.learner)
         .map_err(|e| e.to_string())?
         .spec;
-    if spec.trunk != crossroads_model::TrunkKind::Mlp {
-        return Err("the PyTorch twin implements the MLP trunk only".to_owned());
-    }
+    let grid = &spec.observation;
+    let conv = match spec.trunk {
+        crossroads_model::TrunkKind::Mlp => String::new(),
+        crossroads_model::TrunkKind::Conv => {
+            format!("{},{},{},{}", grid.channels, grid.rows, grid.cols, grid.extra)
+        }
+    };
     let l = &config.learner;
     let (optimizer, eps, decay) = match OptimizerConfig::from_config(l) {
         OptimizerConfig::Rmsprop { eps, decay, .. } => ("rmsprop", eps, decay),
@@ -76,6 +80,7 @@ fn pytorch(config: &Config, o: &Options) -> Result<serde_json::Value, String> {
         .arg(&script)
         .args(["--input", &spec.input_len().to_string()])
         .args(["--hidden", &hidden.join(",")])
+        .args(["--conv", &conv])
         .args(["--actions", &spec.num_actions.to_string()])
         .args(["--batch", &batches.join(",")])
         .args(["--threads", &o.threads.to_string()])
