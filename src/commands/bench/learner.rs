@@ -64,7 +64,10 @@ fn pytorch(config: &Config, o: &Options) -> Result<serde_json::Value, String> {
     let conv = match spec.trunk {
         crossroads_model::TrunkKind::Mlp => String::new(),
         crossroads_model::TrunkKind::Conv => {
-            format!("{},{},{},{}", grid.channels, grid.rows, grid.cols, grid.extra)
+            format!(
+                "{},{},{},{}",
+                grid.channels, grid.rows, grid.cols, grid.extra
+            )
         }
     };
     let l = &config.learner;
