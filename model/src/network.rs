@@ -5,7 +5,7 @@
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use crate::ModelError;
-use crate::observations::{Observations, SparseRows};
+use crate::observations::{self, Observations, SparseRows};
 use crate::spec::{NetworkSpec, TrunkKind};
 use crate::weights::{self, WeightsMeta};
 
@@ -263,7 +263,7 @@ impl QNetwork {
     /// Whether the first layer reads [`Observations::Sparse`] without
     /// densifying them (an MLP trunk with a hidden layer).
     fn reads_sparse(&self) -> bool {
-        matches!(&self.trunk, TrunkLayers::Mlp { first: Some(_), .. })
+        observations::reads_sparse(&self.spec)
     }
 
     /// Turns a tensor shaped like variable `name` between the layout the

@@ -109,7 +109,7 @@ impl Observations {
     /// `rows` observations long.
     pub fn new(spec: &NetworkSpec, values: &[f32], rows: usize) -> Self {
         let width = spec.input_len() as usize;
-        if spec.trunk == TrunkKind::Mlp && !spec.hidden.is_empty() {
+        if reads_sparse(spec) {
             Observations::Sparse(SparseRows::from_dense(values, rows, width))
         } else {
             assert_eq!(values.len(), rows * width, "rows * width values");
@@ -133,6 +133,13 @@ impl Observations {
             Observations::Sparse(s) => s.to_dense(),
         }
     }
+}
+
+/// Whether `spec`'s network reads [`Observations::Sparse`] without
+/// densifying them: an MLP trunk with a hidden layer (its first layer is
+/// the embedding bag); a conv trunk or bare heads read dense rows.
+pub(crate) fn reads_sparse(spec: &NetworkSpec) -> bool {
+    spec.trunk == TrunkKind::Mlp && !spec.hidden.is_empty()
 }
 
 impl From<Tensor> for Observations {
