@@ -489,6 +489,11 @@ pub struct PolicyArgs {
     /// `yield_decel=4.5` counts on comfortable braking only).
     #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]
     pub shield: Option<String>,
+    /// Number format of a network policy's trunk: f32 (the same result on
+    /// every machine), bf16, or auto (what a training run's actors use:
+    /// bf16 for a conv trunk on a CPU with AMX-BF16).
+    #[arg(long, default_value = "f32", value_name = "auto|f32|bf16")]
+    pub precision: crossroads_config::PrecisionSetting,
 }
 
 /// `crossroads eval`.

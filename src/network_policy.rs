@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};
 
 use anyhow::Context;
-use crossroads_model::{QNetwork, WeightsMeta};
+use crossroads_config::PrecisionSetting;
+use crossroads_model::{Precision, QNetwork, WeightsMeta, Work};
 use crossroads_sim::{ActionSet, Env, Policy, PolicyRng, SimError};
 
 /// Greedy policy of a Q-network. `act` runs one forward pass for the whole
@@ -126,6 +127,21 @@ impl NetworkPolicy {
         }
         let members: Vec<&[u8]> = bytes.iter().map(Vec::as_slice).collect();
         Self::ensemble(&members, format!("dqn-mean:{}", labels.join("+")))
+    }
+
+    /// Computes every copy's trunk in the format `setting` chooses for
+    /// this network (fp32 after loading).
+    pub fn set_precision(&mut self, setting: PrecisionSetting) {
+        let precision = Precision::choose(setting, &self.spec, Work::Acting);
+        if precision != Precision::F32 {
+            self.name = format!("{} ({precision})", self.name.trim_end_matches(" (bf16)"));
+        }
+        for copies in &mut self.nets {
+            let members = copies.get_mut().unwrap_or_else(PoisonError::into_inner);
+            for net in members.iter_mut() {
+                net.set_precision(precision);
+            }
+        }
     }
 
     /// The network's spec.

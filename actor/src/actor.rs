@@ -346,9 +346,12 @@ impl Actor {
                 self.settings.action_set
             )));
         }
-        values
-            .q_values(self.envs.observations(), m, &mut self.q)
-            .map_err(|e| ActorError::Values(e.to_string()))?;
+        if values.reads_sparse() {
+            values.q_values_sparse(self.envs.sparse_observations(), &mut self.q)
+        } else {
+            values.q_values(self.envs.observations(), m, &mut self.q)
+        }
+        .map_err(|e| ActorError::Values(e.to_string()))?;
         let training = self.settings.mode.is_training();
         if training {
             for i in 0..m {

@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use crossroads_common::Shutdown;
 use crossroads_config::Config;
-use crossroads_model::{QNetwork, network_spec};
+use crossroads_model::{Precision, QNetwork, Work, network_spec};
 use crossroads_transport::WeightsSlot;
 use prometheus::Registry;
 use tokio::task::JoinHandle;
@@ -51,8 +51,11 @@ impl ActorParts {
         let spec = network_spec(&config.sim, &config.learner).map_err(|e| {
             ActorError::Config(format!("the [learner] network the actor starts from: {e}"))
         })?;
-        let net = QNetwork::new(spec, config.learner.seed)
+        let mut net = QNetwork::new(spec, config.learner.seed)
             .map_err(|e| ActorError::Values(format!("building the first network: {e}")))?;
+        let precision = Precision::choose(config.runtime.precision, net.spec(), Work::Acting);
+        net.set_precision(precision);
+        tracing::info!(%precision, "actor network number format");
         let weights = WeightsSlot::new();
         Ok(Self {
             actor: Actor::new(settings, metrics.clone())?,

@@ -1,5 +1,7 @@
 //! The one thing the actor needs from a Q-network: batched action values.
 
+use crossroads_model::QNetwork;
+
 /// Error of an [`ActionValues`] implementation (a forward pass that failed,
 /// weights that do not fit).
 pub type ValuesError = Box<dyn std::error::Error + Send + Sync>;
@@ -22,12 +24,50 @@ pub trait ActionValues {
     /// Writes the Q-values of the observations `obs` (`n x obs_len`) into
     /// `out` (`n x num_actions`).
     fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError>;
+
+    /// Whether [`ActionValues::q_values_sparse`] is the cheaper call (the
+    /// network reads only the non-zero values). The caller asks before
+    /// each call.
+    fn reads_sparse(&self) -> bool {
+        false
+    }
+
+    /// [`ActionValues::q_values`] of observations given as their non-zero
+    /// values, `(index, value)` per observation
+    /// ([`crate::VecEnv::sparse_observations`]). By default spread into
+    /// dense rows for `q_values`.
+    fn q_values_sparse(
+        &mut self,
+        rows: &[Vec<(u32, f32)>],
+        out: &mut [f32],
+    ) -> Result<(), ValuesError> {
+        let len = self.obs_len();
+        let mut dense = vec![0.0; rows.len() * len];
+        for (r, (row, pairs)) in dense.chunks_exact_mut(len.max(1)).zip(rows).enumerate() {
+            for &(i, v) in pairs {
+                *row.get_mut(i as usize).ok_or_else(|| {
+                    format!("observation {r} has a value at {i}, beyond its {len} values")
+                })? = v;
+            }
+        }
+        self.q_values(&dense, rows.len(), out)
+    }
+}
+
+/// Copies a network's Q-values into the caller's buffer.
+fn write_q(q: &[f32], out: &mut [f32]) -> Result<(), ValuesError> {
+    let room = out.len();
+    let out = out
+        .get_mut(..q.len())
+        .ok_or_else(|| format!("output holds {room} values, the network wrote {}", q.len()))?;
+    out.copy_from_slice(q);
+    Ok(())
 }
 
 /// The Q-network drives the actor: one batched forward pass per call, no
 /// graph recorded. Its spec must fit the environments (observation length
 /// and action count); [`crate::Actor`] checks that before the first step.
-impl ActionValues for crossroads_model::QNetwork {
+impl ActionValues for QNetwork {
     fn obs_len(&self) -> usize {
         self.spec().input_len() as usize
     }
@@ -41,17 +81,19 @@ impl ActionValues for crossroads_model::QNetwork {
         let rows = obs
             .get(..len)
             .ok_or_else(|| format!("{n} observations need {len} values, got {}", obs.len()))?;
-        let q = self.infer(rows, n)?;
-        if out.len() < q.q.len() {
-            return Err(format!(
-                "output holds {} values, the network wrote {}",
-                out.len(),
-                q.q.len()
-            )
-            .into());
-        }
-        out[..q.q.len()].copy_from_slice(&q.q);
-        Ok(())
+        write_q(&self.infer(rows, n)?.q, out)
+    }
+
+    fn reads_sparse(&self) -> bool {
+        QNetwork::reads_sparse(self)
+    }
+
+    fn q_values_sparse(
+        &mut self,
+        rows: &[Vec<(u32, f32)>],
+        out: &mut [f32],
+    ) -> Result<(), ValuesError> {
+        write_q(&self.infer_sparse(rows)?.q, out)
     }
 }
 

@@ -1,5 +1,6 @@
-//! M environments of one scenario stepped in parallel, their observations in
-//! one contiguous buffer for one batched forward pass.
+//! M environments of one scenario stepped in parallel, their observations
+//! as each one's non-zero values and, when asked for, in one contiguous
+//! dense buffer, for one batched forward pass.
 
 use std::sync::Arc;
 
@@ -54,8 +55,10 @@ struct Slot {
 }
 
 /// M environments of one scenario and action set. Owns their current
-/// observations as one `M x obs_len` buffer ([`VecEnv::observations`]);
-/// [`VecEnv::step`] applies one action per environment in parallel on the
+/// observations: the simulators write each one's non-zero values
+/// ([`VecEnv::sparse_observations`], a few dozen of a TTG grid's 2344),
+/// and [`VecEnv::observations`] spreads them into one `M x obs_len` dense
+/// buffer when a caller asks; [`VecEnv::step`] applies one action per environment in parallel on the
 /// rayon pool and resets finished ones at once with fresh seeds: episode
 /// `e` of environment `i` uses `episode_seed(episode_seed(seed, i), e)`,
 /// so a run depends on the seed only, not on threads. Optionally encodes
@@ -67,7 +70,13 @@ pub struct VecEnv {
     config: EnvConfig,
     spec: ObsSpec,
     slots: Vec<Slot>,
-    obs: Vec<f32>,
+    /// Each environment's current observation: its non-zero values in
+    /// increasing index order.
+    sparse: Vec<Vec<(u32, f32)>>,
+    /// The same observations, `M x obs_len`, as of the last
+    /// [`VecEnv::observations`] call; stale while `dense_fresh` is false.
+    dense: Vec<f32>,
+    dense_fresh: bool,
     results: Vec<EnvStep>,
     encoding: Option<ObservationEncoding>,
 }
@@ -105,17 +114,19 @@ impl VecEnv {
             config,
             spec,
             slots,
-            obs: vec![0.0; envs * len],
+            sparse: vec![Vec::new(); envs],
+            dense: vec![0.0; envs * len],
+            dense_fresh: false,
             results: vec![EnvStep::default(); envs],
             encoding,
         };
         v.slots
             .par_iter_mut()
-            .zip(v.obs.par_chunks_mut(len))
-            .try_for_each(|(slot, out)| {
+            .zip(v.sparse.par_iter_mut())
+            .for_each(|(slot, out)| {
                 slot.start_episode();
-                slot.observe(out, encoding)
-            })?;
+                slot.observe(out, encoding, len);
+            });
         Ok(v)
     }
 
@@ -161,9 +172,27 @@ impl VecEnv {
         &self.scenario
     }
 
-    /// The current observations, `M x obs_len`, row `i` for environment `i`.
-    pub fn observations(&self) -> &[f32] {
-        &self.obs
+    /// The current observations, `M x obs_len`, row `i` for environment
+    /// `i`: spread from [`VecEnv::sparse_observations`] on the first call
+    /// after a step (for a network that reads dense rows).
+    pub fn observations(&mut self) -> &[f32] {
+        if !self.dense_fresh {
+            let len = self.spec.len();
+            for (row, pairs) in self.dense.chunks_exact_mut(len).zip(&self.sparse) {
+                row.fill(0.0);
+                for &(i, v) in pairs {
+                    row[i as usize] = v;
+                }
+            }
+            self.dense_fresh = true;
+        }
+        &self.dense
+    }
+
+    /// The current observations, one per environment: each one's non-zero
+    /// values as `(index, value)` in increasing index order.
+    pub fn sparse_observations(&self) -> &[Vec<(u32, f32)>] {
+        &self.sparse
     }
 
     /// Environment `i`.
@@ -203,13 +232,14 @@ impl VecEnv {
         }
         let len = self.spec.len();
         let encoding = self.encoding;
+        self.dense_fresh = false;
         self.slots
             .par_iter_mut()
-            .zip(self.obs.par_chunks_mut(len))
+            .zip(self.sparse.par_iter_mut())
             .zip(self.results.par_iter_mut())
             .zip(actions.par_iter())
             .try_for_each(|(((slot, out), result), &action)| {
-                *result = slot.step(action, out, encoding)?;
+                *result = slot.step(action, out, encoding, len)?;
                 Ok::<_, ActorError>(())
             })?;
         Ok(&self.results)
@@ -225,22 +255,23 @@ impl Slot {
 
     fn observe(
         &mut self,
-        out: &mut [f32],
+        out: &mut Vec<(u32, f32)>,
         encoding: Option<ObservationEncoding>,
-    ) -> Result<(), ActorError> {
-        self.env.write_observation(out)?;
+        len: usize,
+    ) {
+        self.env.write_observation_sparse(out);
         if let Some(encoding) = encoding {
             self.encoded.clear();
-            codec::encode(encoding, out, &mut self.encoded);
+            codec::encode_pairs(encoding, out, len, &mut self.encoded);
         }
-        Ok(())
     }
 
     fn step(
         &mut self,
         action: usize,
-        out: &mut [f32],
+        out: &mut Vec<(u32, f32)>,
         encoding: Option<ObservationEncoding>,
+        len: usize,
     ) -> Result<EnvStep, ActorError> {
         let r = self.env.step(action)?;
         let mut episode = None;
@@ -254,13 +285,13 @@ impl Slot {
                 seed: self.episode_seed,
             });
             if let Some(encoding) = encoding {
-                self.env.write_observation(out)?;
+                self.env.write_observation_sparse(out);
                 self.terminal.clear();
-                codec::encode(encoding, out, &mut self.terminal);
+                codec::encode_pairs(encoding, out, len, &mut self.terminal);
             }
             self.start_episode();
         }
-        self.observe(out, encoding)?;
+        self.observe(out, encoding, len);
         Ok(EnvStep {
             reward: r.reward,
             steps: r.steps,

@@ -126,6 +126,8 @@ impl LiveNetwork {
                 version = w.version,
                 "the learner's network differs from the actor's first one; using the learner's"
             );
+            let mut net = net;
+            net.set_precision(self.net.precision());
             self.net = net;
         }
         self.version = w.version;
@@ -140,6 +142,16 @@ impl LiveNetwork {
     }
 }
 
+impl LiveNetwork {
+    /// [`LiveNetwork::refresh`], its error as an [`ActionValues`] one.
+    fn refresh_for_values(&mut self) -> Result<(), ValuesError> {
+        self.refresh().map_err(|e| match e {
+            ActorError::Values(message) => ValuesError::from(message),
+            other => Box::new(other),
+        })
+    }
+}
+
 impl ActionValues for LiveNetwork {
     fn obs_len(&self) -> usize {
         ActionValues::obs_len(&self.net)
@@ -150,12 +162,25 @@ impl ActionValues for LiveNetwork {
     }
 
     fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError> {
-        self.refresh().map_err(|e| match e {
-            ActorError::Values(message) => ValuesError::from(message),
-            other => Box::new(other),
-        })?;
+        self.refresh_for_values()?;
         let started = Instant::now();
         let result = ActionValues::q_values(&mut self.net, obs, n, out);
+        self.metrics.forward_pass(started.elapsed().as_secs_f64());
+        result
+    }
+
+    fn reads_sparse(&self) -> bool {
+        ActionValues::reads_sparse(&self.net)
+    }
+
+    fn q_values_sparse(
+        &mut self,
+        rows: &[Vec<(u32, f32)>],
+        out: &mut [f32],
+    ) -> Result<(), ValuesError> {
+        self.refresh_for_values()?;
+        let started = Instant::now();
+        let result = ActionValues::q_values_sparse(&mut self.net, rows, out);
         self.metrics.forward_pass(started.elapsed().as_secs_f64());
         result
     }

@@ -1,10 +1,10 @@
-//! `[runtime]`: the process's threads.
+//! `[runtime]`: the process's threads and number format.
 
 use serde::{Deserialize, Serialize};
 
 use super::Checks;
 
-/// Threads of the process.
+/// Threads of the process and the number format of its networks.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RuntimeConfig {
@@ -24,6 +24,53 @@ pub struct RuntimeConfig {
     /// 1.3x more transitions/s; and one thread keeps its pace beside a
     /// busy process. At most 1024.
     pub torch_threads: usize,
+    /// Number format of the networks an actor and the learner run:
+    /// `auto` (the default) computes a conv trunk in bf16 (fp32 master
+    /// weights) on a CPU with AMX-BF16 matrix units, where it measured
+    /// faster, and everything else in fp32; `f32` always; `bf16` asks for
+    /// it on any CPU (slow without hardware bf16). `eval` and `reproduce`
+    /// run fp32 unless told otherwise, so a cell does not depend on the
+    /// machine.
+    pub precision: PrecisionSetting,
+}
+
+/// `runtime.precision`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PrecisionSetting {
+    /// bf16 where it pays on this CPU, fp32 elsewhere.
+    #[default]
+    Auto,
+    /// fp32 everywhere.
+    F32,
+    /// bf16 for the trunk's dense layers, whatever the CPU.
+    Bf16,
+}
+
+impl PrecisionSetting {
+    /// The name in a config file: `auto`, `f32` or `bf16`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::F32 => "f32",
+            Self::Bf16 => "bf16",
+        }
+    }
+}
+
+impl std::str::FromStr for PrecisionSetting {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "f32" | "fp32" => Ok(Self::F32),
+            "bf16" => Ok(Self::Bf16),
+            other => Err(format!(
+                "precision must be auto, f32 or bf16, got {other:?}"
+            )),
+        }
+    }
 }
 
 impl Default for RuntimeConfig {
@@ -32,6 +79,7 @@ impl Default for RuntimeConfig {
             worker_threads: 2,
             compute_threads: 0,
             torch_threads: 1,
+            precision: PrecisionSetting::Auto,
         }
     }
 }

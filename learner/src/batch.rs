@@ -122,23 +122,26 @@ impl TrainingBatch {
                 .validate()
                 .map_err(|e| LearnerError::Batch(e.to_string()))?;
         }
-        let mut obs = vec![0f32; n * input];
-        let mut next = vec![0f32; n * input];
-        for i in 0..n {
-            let (s, s2) = (
-                batch.columns.observation_index[i] as usize,
-                batch.columns.next_observation_index[i] as usize,
-            );
-            batch
-                .observations
-                .decode_into(s, &mut obs[i * input..(i + 1) * input])
-                .and_then(|()| {
-                    batch
-                        .observations
-                        .decode_into(s2, &mut next[i * input..(i + 1) * input])
+        let pool = &batch.observations;
+        let entries = |column: &[u32]| {
+            let rows = column
+                .iter()
+                .enumerate()
+                .map(|(i, &s)| {
+                    pool.get(s as usize).ok_or_else(|| {
+                        LearnerError::Batch(format!(
+                            "observation of transition {i}: no entry {s} among {}",
+                            pool.len()
+                        ))
+                    })
                 })
-                .map_err(|e| LearnerError::Batch(format!("observation of transition {i}: {e}")))?;
-        }
+                .collect::<Result<Vec<_>, _>>()?;
+            Observations::from_encoded(spec, pool.encoding(), rows.into_iter()).map_err(|(i, e)| {
+                LearnerError::Batch(format!("observation of transition {i}: {e}"))
+            })
+        };
+        let obs = entries(&batch.columns.observation_index)?;
+        let next_obs = entries(&batch.columns.next_observation_index)?;
         let actions: Vec<i64> = batch
             .columns
             .actions
@@ -146,11 +149,11 @@ impl TrainingBatch {
             .map(|&a| i64::from(a))
             .collect();
         Ok(Self {
-            obs: Observations::new(spec, &obs, n),
+            obs,
             actions: Tensor::from_slice(&actions),
             rewards: Tensor::from_slice(&batch.columns.rewards),
             discounts: Tensor::from_slice(&batch.columns.discounts),
-            next_obs: Observations::new(spec, &next, n),
+            next_obs,
             weights: Tensor::from_slice(weights),
             keys,
         })

@@ -6,8 +6,8 @@
 use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
-use crossroads_config::{Config, LearnerConfig, SimConfig};
-use crossroads_model::NetworkSpec;
+use crossroads_config::{Config, LearnerConfig, PrecisionSetting, SimConfig};
+use crossroads_model::{NetworkSpec, Precision, Work};
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 
@@ -114,6 +114,8 @@ pub struct UpdateRate {
     pub updates_per_sec: f64,
     /// Each round's rate.
     pub rounds: Vec<f64>,
+    /// The number format the trunk computed in.
+    pub precision: Precision,
 }
 
 /// The middle value (mean of the two middle ones for an even count); 0 for
@@ -131,14 +133,16 @@ pub fn median(v: &[f64]) -> f64 {
 /// Times `rounds` rounds of updates of at least `round_time` each on a
 /// fixed pool of in-memory batches (data generation is not timed), after a
 /// warm-up; the network is `sim`'s and `config`'s, the optimizer
-/// `config`'s.
+/// `config`'s, computing in the format `precision` chooses for it.
 pub fn updates_per_second(
     sim: &SimConfig,
     config: &LearnerConfig,
+    precision: PrecisionSetting,
     rounds: usize,
     round_time: Duration,
 ) -> Result<UpdateRate, LearnerError> {
     let tc = TrainerConfig::from_config(sim, config)?;
+    let precision = Precision::choose(precision, &tc.spec, Work::Training);
     let mut rng = SplitMix::new(7);
     let batches: Vec<TrainingBatch> = (0..8)
         .map(|i| {
@@ -149,6 +153,7 @@ pub fn updates_per_second(
         })
         .collect::<Result<_, _>>()?;
     let mut trainer = Trainer::new(tc)?;
+    trainer.set_precision(precision);
     for b in batches.iter().take(4) {
         trainer.update(b)?;
     }
@@ -168,6 +173,7 @@ pub fn updates_per_second(
         batch_size: config.batch_size,
         updates_per_sec: median(&rates),
         rounds: rates,
+        precision,
     })
 }
 

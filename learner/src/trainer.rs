@@ -2,7 +2,7 @@
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
 
 use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate};
-use crossroads_model::{NetworkSpec, QNetwork, network_spec};
+use crossroads_model::{NetworkSpec, Precision, QNetwork, network_spec};
 use tch::{Kind, Tensor};
 
 use crate::LearnerError;
@@ -122,14 +122,24 @@ impl Trainer {
         &self.optimizer
     }
 
+    /// Computes both networks' trunks in `precision` from now on (kept
+    /// across [`Trainer::restore`]); weights and optimizer state stay fp32.
+    pub fn set_precision(&mut self, precision: Precision) {
+        self.online.set_precision(precision);
+        self.target.set_precision(precision);
+    }
+
     /// Replaces the whole training state (after loading a checkpoint):
     /// online and target weights, optimizer state and the update count.
     /// Checks everything before changing anything.
     pub fn restore(&mut self, state: TrainerState) -> Result<(), LearnerError> {
+        let precision = self.online.precision();
         let mut online = QNetwork::new(self.config.spec.clone(), 0)?;
         online.load_safetensors(&state.online)?;
+        online.set_precision(precision);
         let mut target = QNetwork::new(self.config.spec.clone(), 0)?;
         target.load_safetensors(&state.target)?;
+        target.set_precision(precision);
         let mut optimizer = Optimizer::new(self.config.optimizer, online.parameters());
         let slots = relayout_slots(&online, state.optimizer);
         optimizer.load_state(slots, state.optimizer_steps)?;

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::Shutdown;
 use crossroads_config::Config;
+use crossroads_model::{Precision, Work};
 use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 use crossroads_types::Weights;
@@ -148,7 +149,14 @@ impl Learner {
     /// Runs on the training thread.
     pub fn new(shared: Arc<Shared>) -> Result<Self, LearnerError> {
         let config = &shared.config;
-        let trainer = Trainer::new(TrainerConfig::from_config(&config.sim, &config.learner)?)?;
+        let mut trainer = Trainer::new(TrainerConfig::from_config(&config.sim, &config.learner)?)?;
+        let precision = Precision::choose(
+            config.runtime.precision,
+            &trainer.config().spec,
+            Work::Training,
+        );
+        trainer.set_precision(precision);
+        tracing::info!(%precision, "learner network number format");
         let shm = if config.learner.shm_publish {
             let bytes = trainer.online().to_safetensors(0)?.len();
             Some(

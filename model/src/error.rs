@@ -18,6 +18,16 @@ pub enum ModelError {
         /// Shape it got.
         got: Vec<i64>,
     },
+    /// A sparse observation names a value beyond the observation's length.
+    #[error("observation {row} has a value at index {index}, beyond its {width} values")]
+    Index {
+        /// Row in the batch.
+        row: usize,
+        /// The index given.
+        index: usize,
+        /// Values in an observation.
+        width: usize,
+    },
     /// The input is not f32.
     #[error("expected f32 input, got {0:?}")]
     Kind(Kind),

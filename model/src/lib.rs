@@ -11,7 +11,9 @@
 //! [`QNetwork::q_values`] the differentiable forward pass the learner trains;
 //! both read [`Observations`], sparse where the trunk's first layer can
 //! skip the zeros of a TTG observation (an MLP's: an embedding bag over its
-//! transposed weight).
+//! transposed weight). A network computes its trunk in a [`Precision`]:
+//! fp32, or bf16 over fp32 master weights where the CPU has matrix units
+//! for it.
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
 //! and PyTorch. [`network_spec`] is the network a run's `[sim]` and
@@ -21,6 +23,7 @@ mod config;
 mod error;
 mod network;
 mod observations;
+mod precision;
 pub mod weights;
 
 pub use config::network_spec;
@@ -31,4 +34,5 @@ pub use crossroads_types::spec::{
 pub use error::ModelError;
 pub use network::{QBatch, QNetwork};
 pub use observations::{Observations, SparseRows};
+pub use precision::{Precision, Work, cpu_has_amx_bf16};
 pub use weights::WeightsMeta;

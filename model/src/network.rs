@@ -6,6 +6,7 @@ use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use crate::ModelError;
 use crate::observations::{self, Observations, SparseRows};
+use crate::precision::Precision;
 use crate::spec::{NetworkSpec, TrunkKind};
 use crate::weights::{self, WeightsMeta};
 
@@ -73,8 +74,9 @@ enum TrunkLayers {
         first: Option<FirstLayer>,
         rest: Vec<nn::Linear>,
     },
+    /// Each convolution with its stride (3x3 kernels, padding 1).
     Conv {
-        convs: Vec<nn::Conv2D>,
+        convs: Vec<(nn::Conv2D, i64)>,
         fc: nn::Linear,
     },
 }
@@ -92,6 +94,7 @@ pub struct QNetwork {
     trunk: TrunkLayers,
     value: nn::Linear,
     advantage: nn::Linear,
+    precision: Precision,
 }
 
 impl std::fmt::Debug for QNetwork {
@@ -99,6 +102,7 @@ impl std::fmt::Debug for QNetwork {
         f.debug_struct("QNetwork")
             .field("spec", &self.spec)
             .field("parameters", &self.num_parameters())
+            .field("precision", &self.precision)
             .finish_non_exhaustive()
     }
 }
@@ -194,7 +198,7 @@ impl QNetwork {
                         padding: 1,
                         ..Default::default()
                     };
-                    convs.push(nn::conv2d(&trunk_path / i, c, out, 3, config));
+                    convs.push((nn::conv2d(&trunk_path / i, c, out, 3, config), stride));
                     c = out;
                     h = conv_out(h, stride);
                     w = conv_out(w, stride);
@@ -217,7 +221,20 @@ impl QNetwork {
             trunk,
             value,
             advantage,
+            precision: Precision::F32,
         })
+    }
+
+    /// The number format of the trunk (fp32 from [`QNetwork::new`]).
+    pub fn precision(&self) -> Precision {
+        self.precision
+    }
+
+    /// Computes the trunk in `precision` from now on; the variables stay
+    /// fp32 (see [`Precision`]), so loading weights, copies and files do
+    /// not change.
+    pub fn set_precision(&mut self, precision: Precision) {
+        self.precision = precision;
     }
 
     /// What this network is.
@@ -262,7 +279,7 @@ impl QNetwork {
 
     /// Whether the first layer reads [`Observations::Sparse`] without
     /// densifying them (an MLP trunk with a hidden layer).
-    fn reads_sparse(&self) -> bool {
+    pub fn reads_sparse(&self) -> bool {
         observations::reads_sparse(&self.spec)
     }
 
@@ -339,16 +356,17 @@ impl QNetwork {
     }
 
     fn trunk_features(&self, obs: &Observations) -> Tensor {
-        match &self.trunk {
+        let h = match &self.trunk {
             TrunkLayers::Mlp { first, rest } => {
                 let h = match first {
                     Some(first) => first.forward(obs).relu(),
                     None => obs.to_dense(),
                 };
-                rest.iter().fold(h, |h, l| l.forward(&h).relu())
+                rest.iter()
+                    .fold(self.cast(h), |h, l| self.linear(l, &h).relu())
             }
             TrunkLayers::Conv { convs, fc } => {
-                let obs = obs.to_dense();
+                let obs = self.cast(obs.to_dense());
                 let o = &self.spec.observation;
                 let batch = obs.size()[0];
                 let grid = obs
@@ -356,15 +374,54 @@ impl QNetwork {
                     .reshape([batch, o.channels, o.rows, o.cols]);
                 let maps = convs
                     .iter()
-                    .fold(grid, |h, conv| conv.forward(&h).relu())
+                    .fold(grid, |h, (conv, stride)| {
+                        self.conv(conv, *stride, &h).relu()
+                    })
                     .flatten(1, -1);
                 let joined = if o.extra > 0 {
                     Tensor::cat(&[maps, obs.narrow(1, o.grid_len(), o.extra)], 1)
                 } else {
                     maps
                 };
-                fc.forward(&joined).relu()
+                self.linear(fc, &joined).relu()
             }
+        };
+        h.to_kind(Kind::Float)
+    }
+
+    /// `x` in the trunk's number format.
+    fn cast(&self, x: Tensor) -> Tensor {
+        match self.precision {
+            Precision::F32 => x,
+            Precision::Bf16 => x.to_kind(Kind::BFloat16),
+        }
+    }
+
+    /// A dense layer of the trunk, its weights cast to the trunk's format
+    /// (`x` is in it already).
+    fn linear(&self, layer: &nn::Linear, x: &Tensor) -> Tensor {
+        match self.precision {
+            Precision::F32 => layer.forward(x),
+            Precision::Bf16 => x.linear(
+                &layer.ws.to_kind(Kind::BFloat16),
+                layer.bs.as_ref().map(|b| b.to_kind(Kind::BFloat16)),
+            ),
+        }
+    }
+
+    /// A 3x3 convolution of the trunk (padding 1), as
+    /// [`QNetwork::linear`].
+    fn conv(&self, layer: &nn::Conv2D, stride: i64, x: &Tensor) -> Tensor {
+        match self.precision {
+            Precision::F32 => layer.forward(x),
+            Precision::Bf16 => x.conv2d(
+                &layer.ws.to_kind(Kind::BFloat16),
+                layer.bs.as_ref().map(|b| b.to_kind(Kind::BFloat16)),
+                [stride; 2],
+                [1, 1],
+                [1, 1],
+                1,
+            ),
         }
     }
 
@@ -394,7 +451,35 @@ impl QNetwork {
             }
             Observations::new(&self.spec, obs, batch)
         };
-        let q = tch::no_grad(|| self.forward(&x));
+        self.infer_observations(&x)
+    }
+
+    /// [`QNetwork::infer`] of observations given as their non-zero values:
+    /// one list of `(index, value)` per observation, each index once (what
+    /// the simulators write, `Env::write_observation_sparse`). A network
+    /// that reads sparse rows takes them as they are; any other gets them
+    /// spread into dense rows. Fails on an index beyond the observation
+    /// and on NaN or infinite values.
+    pub fn infer_sparse<R: AsRef<[(u32, f32)]>>(&self, rows: &[R]) -> Result<QBatch, ModelError> {
+        if rows.is_empty() {
+            return Err(ModelError::Shape {
+                expected: self.spec.input_len(),
+                got: vec![0],
+            });
+        }
+        let width = self.spec.input_len() as usize;
+        let sparse =
+            SparseRows::from_pairs(rows.iter().map(|r| r.as_ref().iter().copied()), width)?;
+        let x = if self.reads_sparse() {
+            Observations::Sparse(sparse)
+        } else {
+            Observations::Dense(sparse.to_dense())
+        };
+        self.infer_observations(&x)
+    }
+
+    fn infer_observations(&self, x: &Observations) -> Result<QBatch, ModelError> {
+        let q = tch::no_grad(|| self.forward(x));
         let q = Vec::<f32>::try_from(q.flatten(0, -1))?;
         Ok(QBatch {
             q,

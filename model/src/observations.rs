@@ -5,9 +5,10 @@
 //! bag with per-sample weights), which skips the zeros the dense product
 //! multiplies.
 
-use crossroads_types::codec;
+use crossroads_types::codec::{self, CodecError, ObservationEncoding};
 use tch::{Kind, Tensor};
 
+use crate::ModelError;
 use crate::spec::{NetworkSpec, TrunkKind};
 
 /// A batch of observations as a [`QNetwork`](crate::QNetwork) reads them.
@@ -62,16 +63,55 @@ impl SparseRows {
             });
         }
         offsets.resize(rows, indices.len() as i64);
-        let rows = Self {
-            indices: Tensor::from_slice(&indices),
-            values: Tensor::from_slice(&nonzero),
-            offsets: Tensor::from_slice(&offsets),
-            rows: rows as i64,
-            width: width as i64,
-        };
+        let rows = Self::from_parts(&indices, &nonzero, &offsets, width);
         match bad {
             None => Ok(rows),
             Some(i) => Err((i, rows)),
+        }
+    }
+
+    /// Rows given by their non-zero values: `rows` yields each row's
+    /// `(index, value)` pairs (each index once, below `width`). What the
+    /// simulators write and the replay stores, taken without a dense
+    /// buffer in between. Fails naming the row of an index out of range
+    /// or of a NaN or infinite value.
+    pub fn from_pairs<R, P>(rows: R, width: usize) -> Result<Self, ModelError>
+    where
+        R: IntoIterator<Item = P>,
+        P: IntoIterator<Item = (u32, f32)>,
+    {
+        let mut indices = Vec::new();
+        let mut nonzero = Vec::new();
+        let mut offsets = Vec::new();
+        for (r, row) in rows.into_iter().enumerate() {
+            offsets.push(indices.len() as i64);
+            for (i, v) in row {
+                if i as usize >= width {
+                    return Err(ModelError::Index {
+                        row: r,
+                        index: i as usize,
+                        width,
+                    });
+                }
+                if !v.is_finite() {
+                    return Err(ModelError::NonFinite(format!("observation {r} value {i}")));
+                }
+                indices.push(i64::from(i));
+                nonzero.push(v);
+            }
+        }
+        Ok(Self::from_parts(&indices, &nonzero, &offsets, width))
+    }
+
+    /// The rows whose `r`th holds `values[offsets[r]..offsets[r + 1]]` at
+    /// columns `indices[..]` (the last up to the end).
+    fn from_parts(indices: &[i64], values: &[f32], offsets: &[i64], width: usize) -> Self {
+        Self {
+            indices: Tensor::from_slice(indices),
+            values: Tensor::from_slice(values),
+            offsets: Tensor::from_slice(offsets),
+            rows: offsets.len() as i64,
+            width: width as i64,
         }
     }
 
@@ -115,6 +155,40 @@ impl Observations {
             assert_eq!(values.len(), rows * width, "rows * width values");
             Observations::Dense(Tensor::from_slice(values).reshape([rows as i64, width as i64]))
         }
+    }
+
+    /// Observations encoded with the observation codec (the replay's
+    /// entries), one per item of `rows`, in the form `spec`'s network
+    /// reads fastest: sparse entries go straight into
+    /// [`SparseRows::from_pairs`] for a network that reads sparse rows,
+    /// everything else is decoded into dense rows. Each entry is checked
+    /// ([`codec::check`]); an error gives the position of the first bad
+    /// one.
+    pub fn from_encoded<'a>(
+        spec: &NetworkSpec,
+        encoding: ObservationEncoding,
+        rows: impl ExactSizeIterator<Item = &'a [u8]>,
+    ) -> Result<Self, (usize, CodecError)> {
+        let width = spec.input_len() as usize;
+        let n = rows.len();
+        if reads_sparse(spec) && encoding == ObservationEncoding::SparseF32 {
+            let (mut indices, mut values, mut offsets) = (Vec::new(), Vec::new(), Vec::new());
+            for (r, bytes) in rows.enumerate() {
+                codec::check(encoding, bytes, width).map_err(|e| (r, e))?;
+                offsets.push(indices.len() as i64);
+                for (i, v) in codec::sparse_pairs(bytes) {
+                    indices.push(i64::from(i));
+                    values.push(v);
+                }
+            }
+            let sparse = SparseRows::from_parts(&indices, &values, &offsets, width);
+            return Ok(Observations::Sparse(sparse));
+        }
+        let mut dense = vec![0f32; n * width];
+        for ((r, bytes), out) in rows.enumerate().zip(dense.chunks_exact_mut(width.max(1))) {
+            codec::decode_into(encoding, bytes, out).map_err(|e| (r, e))?;
+        }
+        Ok(Observations::new(spec, &dense, n))
     }
 
     /// Rows in the batch.

@@ -1,7 +1,7 @@
 //! A forward pass through libtorch on CPU with known weights.
 
 use crossroads_model::{
-    NetworkSpec, ObservationLayout, Observations, QNetwork, TrunkKind, weights,
+    NetworkSpec, ObservationLayout, Observations, Precision, QNetwork, TrunkKind, weights,
 };
 use tch::{Device, Kind, Tensor};
 
@@ -399,4 +399,92 @@ fn the_first_mlp_weight_keeps_pytorchs_layout_outside_the_network() {
     assert_eq!(net.file_layout("trunk.0.weight", t).size(), vec![23, 8]);
     let t = Tensor::zeros([1, 8], (Kind::Float, Device::Cpu));
     assert_eq!(net.file_layout("value.weight", t).size(), vec![1, 8]);
+}
+
+/// A bf16 trunk computes what the fp32 one does to bf16's precision,
+/// trains the fp32 variables (its gradients point the same way), and the
+/// format survives loading weights.
+#[test]
+fn a_bf16_trunk_follows_the_fp32_one_over_fp32_variables() {
+    for trunk in [TrunkKind::Conv, TrunkKind::Mlp] {
+        let hidden = match trunk {
+            TrunkKind::Conv => vec![4, 8, 32],
+            TrunkKind::Mlp => vec![32, 16],
+        };
+        let spec = NetworkSpec::new("ttg", "ttg", trunk, hidden).expect("valid spec");
+        let f32_net = QNetwork::new(spec.clone(), 7).expect("network");
+        let mut bf16_net = QNetwork::new(spec.clone(), 7).expect("network");
+        bf16_net.set_precision(Precision::Bf16);
+        assert_eq!(bf16_net.precision(), Precision::Bf16);
+        let rows = 6;
+        let values: Vec<f32> = sparse_rows(spec.input_len() as usize, rows)
+            .into_iter()
+            .map(|v| v.clamp(-1.0, 1.0))
+            .collect();
+        let x = Tensor::from_slice(&values).reshape([rows as i64, spec.input_len()]);
+
+        let q32 = f32_net.q_values(&x).unwrap();
+        let q16 = bf16_net.q_values(&x).unwrap();
+        assert_eq!(q16.kind(), Kind::Float, "{trunk:?}: Q-values stay f32");
+        let scale = q32.abs().max().double_value(&[]).max(1e-3);
+        let diff = (&q32 - &q16).abs().max().double_value(&[]);
+        assert!(diff > 0.0, "{trunk:?}: bf16 computed exactly fp32");
+        assert!(diff < 0.03 * scale, "{trunk:?}: |dQ| {diff} of |Q| {scale}");
+
+        let grads = |net: &QNetwork, q: Tensor| {
+            let params: Vec<Tensor> = net.parameters().into_iter().map(|(_, t)| t).collect();
+            Tensor::run_backward(&[(&q * &q).sum(Kind::Float)], &params, false, false)
+        };
+        for ((name, _), (g32, g16)) in f32_net
+            .parameters()
+            .iter()
+            .zip(grads(&f32_net, q32).iter().zip(grads(&bf16_net, q16)))
+        {
+            assert_eq!(g16.kind(), Kind::Float, "{trunk:?} {name}");
+            let (a, b) = (g32.flatten(0, -1), g16.flatten(0, -1));
+            let norm = a.norm().double_value(&[]);
+            if norm < 1e-6 {
+                continue;
+            }
+            let cos = a.dot(&b).double_value(&[]) / (norm * b.norm().double_value(&[]));
+            assert!(cos > 0.99, "{trunk:?} {name}: cosine {cos}");
+        }
+
+        let bytes = f32_net.to_safetensors(3).unwrap();
+        bf16_net.load_safetensors(&bytes).unwrap();
+        assert_eq!(bf16_net.precision(), Precision::Bf16);
+        let flat: Vec<f32> = values.clone();
+        let inferred = bf16_net.infer(&flat, rows).unwrap();
+        let q16: Vec<f32> = Vec::try_from(bf16_net.q_values(&x).unwrap().flatten(0, -1)).unwrap();
+        assert_eq!(inferred.q, q16, "{trunk:?}: infer runs the bf16 trunk");
+    }
+}
+
+#[test]
+fn auto_precision_is_bf16_only_for_training_a_conv_trunk_on_amx() {
+    use crossroads_config::PrecisionSetting;
+    use crossroads_model::Work;
+    let conv = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 32]).unwrap();
+    let mlp = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![32]).unwrap();
+    let amx = crossroads_model::cpu_has_amx_bf16();
+    let expected = if amx { Precision::Bf16 } else { Precision::F32 };
+    let auto = PrecisionSetting::Auto;
+    assert_eq!(Precision::choose(auto, &conv, Work::Training), expected);
+    assert_eq!(Precision::choose(auto, &conv, Work::Acting), Precision::F32);
+    assert_eq!(
+        Precision::choose(auto, &mlp, Work::Training),
+        Precision::F32
+    );
+    for spec in [&conv, &mlp] {
+        for work in [Work::Training, Work::Acting] {
+            assert_eq!(
+                Precision::choose(PrecisionSetting::F32, spec, work),
+                Precision::F32
+            );
+            assert_eq!(
+                Precision::choose(PrecisionSetting::Bf16, spec, work),
+                Precision::Bf16
+            );
+        }
+    }
 }

@@ -80,6 +80,22 @@ pub fn encode_pairs(
     for bits in dict {
         out.extend_from_slice(&bits.to_le_bytes());
     }
+    let reference = |v: f32| {
+        // The dictionary holds every value of `pairs`.
+        let r = dict.binary_search(&v.to_bits()).unwrap_or(0) as u32;
+        r.to_le_bytes()
+    };
+    if channels == 1 {
+        // Every value its own cell: no masks, no divisions.
+        put_varint(out, pairs.len() as u64);
+        let mut previous: i64 = -1;
+        for &(i, v) in pairs {
+            put_varint(out, (i64::from(i) - previous - 1) as u64);
+            previous = i64::from(i);
+            out.extend_from_slice(&reference(v)[..width]);
+        }
+        return;
+    }
     let cells = {
         let mut n = 0;
         let mut last = None;
@@ -105,13 +121,9 @@ pub fn encode_pairs(
         }
         put_varint(out, (i64::from(cell) - previous - 1) as u64);
         previous = i64::from(cell);
-        if channels > 1 {
-            out.push(mask);
-        }
+        out.push(mask);
         for (_, v) in &pairs[k..end] {
-            // The dictionary holds every value of `pairs`.
-            let r = dict.binary_search(&v.to_bits()).unwrap_or(0) as u32;
-            out.extend_from_slice(&r.to_le_bytes()[..width]);
+            out.extend_from_slice(&reference(*v)[..width]);
         }
         k = end;
     }

@@ -494,6 +494,15 @@ impl Env {
         observation::write(self, self.config.observation, out)
     }
 
+    /// The observation's non-zero values as `(index, value)` pairs in
+    /// increasing index order, into `out` (cleared first): the values
+    /// [`Env::write_observation`] leaves non-zero, without writing or
+    /// reading the zeros (98 % of a TTG grid). Allocates only to grow
+    /// `out`.
+    pub fn write_observation_sparse(&self, out: &mut Vec<(u32, f32)>) {
+        observation::write_sparse(self, self.config.observation, out);
+    }
+
     /// Shape of the observations this environment writes.
     pub fn obs_spec(&self) -> ObsSpec {
         self.config

@@ -264,10 +264,28 @@ pub(crate) fn compute_visibility(env: &mut Env) {
     env.cell_visible = vis;
 }
 
+/// Where an observation's values go: a dense buffer, or a list of the
+/// values written by index.
+trait Sink {
+    fn set(&mut self, index: usize, value: f32);
+}
+
+impl Sink for [f32] {
+    fn set(&mut self, index: usize, value: f32) {
+        self[index] = value;
+    }
+}
+
+impl Sink for Vec<(u32, f32)> {
+    fn set(&mut self, index: usize, value: f32) {
+        // An observation is far below 2^32 values (the TTG grid's 2344).
+        self.push((index as u32, value));
+    }
+}
+
 /// Writes `env`'s observation of kind `kind` into `out`.
 pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), SimError> {
-    let sc = env.scenario();
-    let spec = kind.spec(sc.occlusion_channels());
+    let spec = kind.spec(env.scenario().occlusion_channels());
     if out.len() != spec.len() {
         return Err(SimError::BufferLength {
             expected: spec.len(),
@@ -275,14 +293,44 @@ pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), Sim
         });
     }
     out.fill(0.0);
+    write_values(env, kind, out);
+    Ok(())
+}
+
+/// Writes the non-zero values of `env`'s observation of kind `kind` into
+/// `out` as `(index, value)` pairs in increasing index order: exactly the
+/// values [`write`] leaves non-zero (of either sign of zero), without
+/// touching the zeros, which are most of a grid.
+pub(crate) fn write_sparse(env: &Env, kind: ObsKind, out: &mut Vec<(u32, f32)>) {
+    out.clear();
+    write_values(env, kind, out);
+    // A cell written twice (two cars in it) holds the later car's values,
+    // as in the dense buffer: a stable sort keeps the writes' order.
+    out.sort_by_key(|&(i, _)| i);
+    out.dedup_by(|later, earlier| {
+        let same = later.0 == earlier.0;
+        if same {
+            *earlier = *later;
+        }
+        same
+    });
+    out.retain(|&(_, v)| v != 0.0);
+}
+
+/// Sets every value of the observation that may be non-zero; the caller
+/// starts from zeros.
+fn write_values<S: Sink + ?Sized>(env: &Env, kind: ObsKind, out: &mut S) {
+    let sc = env.scenario();
+    let spec = kind.spec(sc.occlusion_channels());
     let frame = Frame::of(env, kind);
     let cells = spec.rows * spec.cols;
     let base = kind.car_channels();
     let offsets = base + usize::from(spec.occlusion);
     if spec.occlusion {
-        let occ = &mut out[base * cells..(base + 1) * cells];
-        for (o, &v) in occ.iter_mut().zip(&env.cell_visible) {
-            *o = if v { 0.0 } else { 1.0 };
+        for (cell, &v) in env.cell_visible.iter().enumerate().take(cells) {
+            if !v {
+                out.set(base * cells + cell, 1.0);
+            }
         }
     }
     let limit = sc.spec().speed_limit;
@@ -299,27 +347,32 @@ pub(crate) fn write(env: &Env, kind: ObsKind, out: &mut [f32]) -> Result<(), Sim
             ObsKind::Ttg => wrap_angle(car.heading),
             ObsKind::Sequential => wrap_angle(car.heading - ego_heading),
         };
-        out[cell] = 1.0;
-        out[cells + cell] = (heading / std::f64::consts::PI) as f32;
-        out[2 * cells + cell] = (car.v / limit) as f32;
+        out.set(cell, 1.0);
+        out.set(cells + cell, (heading / std::f64::consts::PI) as f32);
+        out.set(2 * cells + cell, (car.v / limit) as f32);
         if kind == ObsKind::Sequential {
-            out[3 * cells + cell] = (env.car_ttc(car).min(TTC_CAP_S) / TTC_CAP_S) as f32;
+            out.set(
+                3 * cells + cell,
+                (env.car_ttc(car).min(TTC_CAP_S) / TTC_CAP_S) as f32,
+            );
         }
         // x offset along columns, y offset along rows, as in the docs.
         let (dx, dy) = match kind {
             ObsKind::Ttg => (dc, -dr),
             ObsKind::Sequential => (dr, -dc),
         };
-        out[offsets * cells + cell] = dx as f32;
-        out[(offsets + 1) * cells + cell] = dy as f32;
+        out.set(offsets * cells + cell, dx as f32);
+        out.set((offsets + 1) * cells + cell, dy as f32);
     }
     let e = sc.spec();
     let ego = env.ego();
     let progress = (ego.s - e.ego.stop_line_s) / (e.ego.goal_s - e.ego.stop_line_s);
-    let tail = &mut out[spec.grid_len()..];
-    tail[0] = (ego.v / limit) as f32;
-    tail[1] = progress.clamp(0.0, 1.0) as f32;
-    tail[2] = if ego.committed { 1.0 } else { 0.0 };
-    tail[3] = (f64::from(env.steps()) / f64::from(e.step_limit)) as f32;
-    Ok(())
+    let tail = spec.grid_len();
+    out.set(tail, (ego.v / limit) as f32);
+    out.set(tail + 1, progress.clamp(0.0, 1.0) as f32);
+    out.set(tail + 2, if ego.committed { 1.0 } else { 0.0 });
+    out.set(
+        tail + 3,
+        (f64::from(env.steps()) / f64::from(e.step_limit)) as f32,
+    );
 }

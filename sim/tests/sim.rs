@@ -467,6 +467,72 @@ fn ttg_observation_of_a_constructed_scene() {
     ));
 }
 
+/// The sparse observation is the dense one's non-zero values, in index
+/// order, on every grid (with and without occlusion) along whole episodes,
+/// and where two cars share a cell (the later car's values, as dense).
+#[test]
+fn sparse_observations_are_the_dense_ones_non_zero_values() {
+    let check = |e: &Env, pairs: &mut Vec<(u32, f32)>, what: &str| {
+        let mut dense = vec![f32::NAN; e.obs_spec().len()];
+        e.write_observation(&mut dense).unwrap();
+        e.write_observation_sparse(pairs);
+        let expected: Vec<(u32, f32)> = dense
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| **v != 0.0)
+            .map(|(i, v)| (i as u32, *v))
+            .collect();
+        assert_eq!(*pairs, expected, "{what}");
+    };
+    let mut pairs = vec![(7, 7.0); 3];
+    let mut checked = 0;
+    for (name, set) in [
+        ("left", ActionSet::Ttg),
+        ("left", ActionSet::Sequential),
+        ("occluded", ActionSet::Creep),
+        ("occluded", ActionSet::Sequential),
+        ("challenge", ActionSet::Ttg),
+    ] {
+        let mut e = env(name, set);
+        let actions = set.num_actions();
+        for episode in 0..20u64 {
+            e.reset(episode);
+            for step in 0..400usize {
+                check(
+                    &e,
+                    &mut pairs,
+                    &format!("{name} {set:?} episode {episode} step {step}"),
+                );
+                checked += 1;
+                // Every action in turn, one decision in seven.
+                let action = if step % 7 == 6 {
+                    (step / 7) % actions
+                } else {
+                    0
+                };
+                if e.step(action).unwrap().done {
+                    break;
+                }
+            }
+        }
+    }
+    assert!(checked > 500, "{checked} observations checked");
+
+    let mut e = env("left", ActionSet::Ttg);
+    e.clear_traffic();
+    // Centres at x = -32.1 and -39.9 (front = centre + 152.5 m along
+    // lane 0), both in column 8 of row 9, 2.8 m apart bumper to bumper.
+    e.place_car(0, 120.4, 10.0).unwrap();
+    e.place_car(0, 112.6, 4.0).unwrap();
+    check(&e, &mut pairs, "two cars in one cell");
+    let spec = e.obs_spec();
+    let occupied: Vec<_> = pairs
+        .iter()
+        .filter(|(i, _)| (*i as usize) < spec.rows * spec.cols)
+        .collect();
+    assert_eq!(occupied, [&(spec.index(0, 9, 8) as u32, 1.0)], "one cell");
+}
+
 #[test]
 fn sequential_observation_of_a_constructed_scene() {
     let mut e = env("left", ActionSet::Sequential);

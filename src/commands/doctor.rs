@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use crossroads_config::{Config, ConfigLoader, SimConfig};
 use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second};
-use crossroads_model::{NetworkSpec, QNetwork};
+use crossroads_model::{NetworkSpec, Precision, QNetwork, Work, cpu_has_amx_bf16};
 use serde::Serialize;
 use tch::Tensor;
 
@@ -38,6 +38,13 @@ struct Report {
     openmp_wait_policy: String,
     /// The network timed, in one line (`dueling conv 2344-16-32-256 -> 5`).
     network: String,
+    /// The number format the learner's updates compute the trunk in
+    /// (`runtime.precision` resolved for this network and CPU).
+    learner_precision: &'static str,
+    /// The number format of the actors' forward passes.
+    actor_precision: &'static str,
+    /// Whether the CPU has AMX-BF16 matrix units (what `auto` asks for).
+    amx_bf16: bool,
     /// Where its settings came from: the configuration file and the
     /// built-in experiment under it (`--set` and the environment aside).
     config: String,
@@ -129,20 +136,30 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         (None, Some(file)) => file.display().to_string(),
         (None, None) => "built-in defaults".to_owned(),
     };
-    let net = QNetwork::new(spec.clone(), learner.seed).context("building the network")?;
+    let mut net = QNetwork::new(spec.clone(), learner.seed).context("building the network")?;
+    let choose = |work| Precision::choose(config.runtime.precision, &spec, work);
+    let (training, acting) = (choose(Work::Training), choose(Work::Acting));
     let actor_batch = config.actor.envs;
     let learner_batch = learner.batch_size;
-    let update = updates_per_second(&sim, learner, 3, Duration::from_millis(300))
-        .context("timing learner updates")?;
-    let actor_forward = time_inference(&net, actor_batch)?;
-    let learner_forward = time_forward(&net, learner_batch as usize)?;
+    let update = updates_per_second(
+        &sim,
+        learner,
+        config.runtime.precision,
+        3,
+        Duration::from_millis(300),
+    )
+    .context("timing learner updates")?;
+    // The actors' call and the learner's forward pass, each in the
+    // format its role computes in.
+    let mut forwards = || -> anyhow::Result<(f64, f64)> {
+        net.set_precision(acting);
+        let actor = time_inference(&net, actor_batch)?;
+        net.set_precision(training);
+        Ok((actor, time_forward(&net, learner_batch as usize)?))
+    };
+    let (actor_forward, learner_forward) = forwards()?;
     let busy = if args.busy {
-        let (actor, learner) = beside_a_busy_process(|| {
-            Ok((
-                time_inference(&net, actor_batch)?,
-                time_forward(&net, learner_batch as usize)?,
-            ))
-        })?;
+        let (actor, learner) = beside_a_busy_process(&mut forwards)?;
         Some(Busy {
             actor_forward_median_ms: actor,
             learner_forward_median_ms: learner,
@@ -161,6 +178,9 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         openmp: tch::utils::has_openmp(),
         openmp_wait_policy: std::env::var("OMP_WAIT_POLICY").unwrap_or_else(|_| "unset".into()),
         network: super::bench::describe_network(&spec),
+        learner_precision: training.name(),
+        actor_precision: acting.name(),
+        amx_bf16: cpu_has_amx_bf16(),
         config: source,
         actor_batch,
         actor_forward_median_ms: actor_forward,
@@ -182,6 +202,13 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
             report.openmp_wait_policy
         );
         println!("  network          {} ({})", report.network, report.config);
+        println!(
+            "  number format    learner {}, actors {} (runtime.precision {}; AMX-BF16 {})",
+            report.learner_precision,
+            report.actor_precision,
+            config.runtime.precision.name(),
+            if report.amx_bf16 { "yes" } else { "no" }
+        );
         println!(
             "  actor forward    {:.3} ms median (batch {}, actor.envs)",
             report.actor_forward_median_ms, report.actor_batch

@@ -63,7 +63,8 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
     let mut policy: Box<dyn Policy> = match NetworkPolicy::load(Path::new(&args.policy))
         .with_context(|| format!("--policy {}", args.policy))?
     {
-        Some(net) => {
+        Some(mut net) => {
+            net.set_precision(args.precision);
             net.fits(&Env::new(
                 Arc::clone(&scenario),
                 EnvConfig::for_actions(args.actions),

@@ -133,6 +133,35 @@ pub fn encode(encoding: ObservationEncoding, values: &[f32], out: &mut Vec<u8>) 
     }
 }
 
+/// Appends an observation of `len` values given as its non-zero values
+/// (`(index, value)`, increasing indices below `len`) to `out` in
+/// `encoding`: the same bytes [`encode`] writes for the dense values, and
+/// for the sparse encoding without a pass over the zeros.
+pub fn encode_pairs(
+    encoding: ObservationEncoding,
+    pairs: &[(u32, f32)],
+    len: usize,
+    out: &mut Vec<u8>,
+) {
+    match encoding {
+        ObservationEncoding::SparseF32 => {
+            out.reserve(pairs.len() * PAIR);
+            for &(i, v) in pairs.iter().filter(|(_, v)| *v != 0.0) {
+                out.extend_from_slice(&i.to_le_bytes());
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        ObservationEncoding::DenseF32 => {
+            let start = out.len();
+            out.resize(start + len * 4, 0);
+            for &(i, v) in pairs.iter().filter(|(i, _)| (*i as usize) < len) {
+                let at = start + i as usize * 4;
+                out[at..at + 4].copy_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+}
+
 /// Checks that `bytes` is a valid observation of `len` values in
 /// `encoding`: the right length, indices in range and increasing, every
 /// value finite. Returns the number of non-zero values.
@@ -220,6 +249,21 @@ pub fn sparse_pairs(bytes: &[u8]) -> impl Iterator<Item = (u32, f32)> + '_ {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pairs_encode_to_the_bytes_of_their_dense_values() {
+        let values = [0.0, 1.5, 0.0, -2.0, 0.0, 0.25, 0.0];
+        let pairs = [(1, 1.5), (3, -2.0), (5, 0.25)];
+        for encoding in [
+            ObservationEncoding::DenseF32,
+            ObservationEncoding::SparseF32,
+        ] {
+            let (mut from_values, mut from_pairs) = (vec![9], vec![9]);
+            encode(encoding, &values, &mut from_values);
+            encode_pairs(encoding, &pairs, values.len(), &mut from_pairs);
+            assert_eq!(from_pairs, from_values, "{encoding:?}");
+        }
+    }
 
     #[test]
     fn dense_and_sparse_round_trip() {

@@ -84,3 +84,56 @@ fn observations_are_contiguous_and_encoded() {
     assert_eq!(decoded, row1);
     assert!(envs.step(&[0, 1]).is_err(), "one action per environment");
 }
+
+/// The dense rows are spread from the sparse lists, and both are what each
+/// simulator writes itself, step after step (also where a caller reads
+/// only one form for a while).
+#[test]
+fn dense_rows_and_sparse_lists_are_the_simulators_observations() {
+    let scenario = Arc::new(Scenario::builtin("occluded").expect("scenario"));
+    let mut envs = VecEnv::new(
+        scenario,
+        EnvConfig::for_actions(ActionSet::Creep),
+        4,
+        9,
+        Some(ObservationEncoding::SparseF32),
+    )
+    .expect("envs");
+    let len = envs.obs_len();
+    let mut own = vec![0.0; len];
+    for s in 0..80usize {
+        let actions: Vec<usize> = (0..envs.len()).map(|i| (s + i) % 3).collect();
+        envs.step(&actions).expect("step");
+        if s % 3 == 1 {
+            continue; // Neither form read: the next read must still be fresh.
+        }
+        let sparse = envs.sparse_observations().to_vec();
+        let dense = envs.observations().to_vec();
+        for i in 0..envs.len() {
+            envs.env(i)
+                .expect("environment")
+                .write_observation(&mut own)
+                .expect("observation");
+            assert_eq!(
+                &dense[i * len..(i + 1) * len],
+                own.as_slice(),
+                "step {s} env {i}"
+            );
+            let nonzero: Vec<(u32, f32)> = own
+                .iter()
+                .enumerate()
+                .filter(|(_, v)| **v != 0.0)
+                .map(|(k, v)| (k as u32, *v))
+                .collect();
+            assert_eq!(sparse[i], nonzero, "step {s} env {i}");
+            let mut decoded = vec![0.0; len];
+            crossroads_types::codec::decode_into(
+                ObservationEncoding::SparseF32,
+                &envs.take_encoded(i),
+                &mut decoded,
+            )
+            .expect("decodes");
+            assert_eq!(decoded, own, "step {s} env {i} encoded");
+        }
+    }
+}

@@ -2,7 +2,7 @@
 
 use std::io::Write;
 
-use crossroads_config::{Config, ConfigError, ConfigLoader, LogFormat};
+use crossroads_config::{Config, ConfigError, ConfigLoader, LogFormat, PrecisionSetting};
 
 fn toml_file(content: &str) -> tempfile::NamedTempFile {
     let mut f = tempfile::Builder::new()
@@ -63,6 +63,25 @@ fn networks_run_on_one_libtorch_thread_unless_told_otherwise() {
     let (_f, result) = load("[runtime]\ntorch_threads = 4000\n");
     let err = format!("{:#}", result.expect_err("out of range"));
     assert!(err.contains("runtime.torch_threads"), "{err}");
+}
+
+#[test]
+fn precision_is_auto_unless_told_and_names_a_wrong_value() {
+    let (_f, result) = load("");
+    assert_eq!(
+        result.expect("empty file").runtime.precision,
+        PrecisionSetting::Auto
+    );
+    let (_f, result) = load("[runtime]\nprecision = \"f32\"\n");
+    assert_eq!(
+        result.expect("valid").runtime.precision,
+        PrecisionSetting::F32
+    );
+    let (_f, result) = load("[runtime]\nprecision = \"fp16\"\n");
+    let err = format!("{:#}", result.expect_err("no such format"));
+    assert!(err.contains("runtime.precision"), "{err}");
+    assert_eq!("bf16".parse(), Ok(PrecisionSetting::Bf16));
+    assert!("half".parse::<PrecisionSetting>().is_err());
 }
 
 #[test]

@@ -13,6 +13,7 @@ use crossroads_config::Config;
 use crossroads_learner::TrainerConfig;
 use crossroads_learner::bench::{FedReport, fed, fill_replay, updates_per_second};
 use crossroads_learner::optimizer::OptimizerConfig;
+use crossroads_model::Precision;
 use crossroads_transport::grpc::ReplayClient;
 use serde_json::json;
 
@@ -151,7 +152,13 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     for &b in &o.batches {
         let mut l = config.learner.clone();
         l.batch_size = b;
-        memory.push(updates_per_second(&config.sim, &l, o.rounds, round)?);
+        memory.push(updates_per_second(
+            &config.sim,
+            &l,
+            config.runtime.precision,
+            o.rounds,
+            round,
+        )?);
     }
 
     let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -175,8 +182,9 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     };
 
     let spec = TrainerConfig::from_config(&config.sim, &config.learner)?.spec;
+    let precision = memory.first().map_or(Precision::F32, |m| m.precision);
     let network = format!(
-        "{} actions ({}), {}",
+        "{} actions ({}), {}, {precision}",
         super::describe_network(&spec),
         spec.observation.kind,
         OptimizerConfig::from_config(&config.learner).name()
@@ -208,6 +216,7 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
             "{}",
             json!({
                 "network": network,
+                "precision": precision.name(),
                 "threads": o.threads,
                 "load_average": load,
                 "results": rows,
@@ -240,7 +249,7 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
         }
         match &torch {
             Some(Ok(v)) => println!(
-                "PyTorch {} on {} threads, same network, optimizer and loss",
+                "PyTorch {} on {} threads, same network, optimizer and loss, f32",
                 v["torch_version"].as_str().unwrap_or("?"),
                 v["threads"]
             ),
