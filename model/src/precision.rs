@@ -34,12 +34,13 @@ pub enum Work {
 impl Precision {
     /// The format `setting` asks for a network of `spec` doing `work` on
     /// this CPU. `auto` is bf16 for training a conv trunk on a CPU with
-    /// AMX-BF16 (measured on 2 cores of a Xeon: 1.3-1.6x the fp32 updates
-    /// per second at batch 64, the convolutions' backward pass gaining
-    /// most) and fp32 for everything else: an actor's forward pass at its
-    /// batch of 16-32 gained nothing (the casts of the weights cost what
-    /// the matrix units save), an MLP over sparse rows has little dense
-    /// work, and without matrix units bf16 is not measured to pay.
+    /// AMX-BF16 (measured on 2 cores of a Xeon: 1.2-1.8x the fp32 updates
+    /// per second at batch 64, 1.23x the learner's pace inside `train`)
+    /// and fp32 for everything else: an actor's conv forward pass at its
+    /// batch of 16 gained nothing (the casts of the weights cost what the
+    /// matrix units save), an MLP actor in bf16 stored 0.6-0.9x the
+    /// transitions/s, and without matrix units bf16 is not measured to
+    /// pay.
     pub fn choose(setting: PrecisionSetting, spec: &NetworkSpec, work: Work) -> Self {
         match setting {
             PrecisionSetting::F32 => Self::F32,
