@@ -2,6 +2,7 @@
 //! actions, environment steps, n-step transitions and batches.
 
 use std::collections::VecDeque;
+use std::ops::Range;
 use std::sync::Arc;
 
 use crossroads_common::Shutdown;
@@ -19,7 +20,7 @@ use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, Ob
 use crate::push::Pusher;
 use crate::stats::EpisodeStats;
 use crate::values::ActionValues;
-use crate::vec_env::{EpisodeEnd, VecEnv};
+use crate::vec_env::{EnvStep, EpisodeEnd, VecEnv};
 
 /// Everything an [`Actor`] needs, resolved from the config.
 #[derive(Debug, Clone)]
@@ -50,6 +51,9 @@ pub struct ActorSettings {
     pub explore_go_once: bool,
     /// Cut n-step windows before exploratory actions.
     pub cut_at_exploration: bool,
+    /// Act on the environments in two lanes, one lane's forward pass
+    /// beside the other's simulation step (see [`Actor`]).
+    pub pipeline: bool,
 }
 
 /// `[sim]`'s scenario, compiled, and its action set.
@@ -125,6 +129,7 @@ impl ActorSettings {
             mode,
             explore_go_once: config.explore_go_once,
             cut_at_exploration: config.cut_at_exploration,
+            pipeline: config.pipeline,
         })
     }
 }
@@ -233,14 +238,38 @@ pub struct StepSummary {
 }
 
 /// An actor's environments, exploration and n-step assembly. Each
-/// [`step`](Self::step) is one batched forward pass of the caller's
-/// [`ActionValues`] (so the caller may swap weights between steps), one
-/// action per environment and one parallel environment step; in training
-/// mode full batches of transitions queue up for
-/// [`take_batch`](Self::take_batch). Not thread-safe; one per acting loop.
+/// [`step`](Self::step) takes one decision and one simulation action per
+/// environment: batched forward passes of the caller's [`ActionValues`]
+/// (so the caller may swap weights between steps), epsilon-greedy actions
+/// and parallel environment steps; in training mode full batches of
+/// transitions queue up for [`take_batch`](Self::take_batch). Not
+/// thread-safe; one per acting loop.
+///
+/// With `pipeline` (and at least 2 environments) the environments are two
+/// lanes of halves: the calling thread computes one lane's Q-values while
+/// the rayon pool steps the other lane's simulators, so neither the forward
+/// pass nor the simulators wait for the other. The second lane's actions
+/// of one call are chosen at the end of the call before (from its
+/// observations then), so each call is: lane 2 steps / lane 1 decides,
+/// lane 1 steps / lane 2 decides. Every environment still sees its own
+/// seeds and random streams; only which weights version a lane acts with
+/// may differ by one update.
 #[derive(Debug)]
 pub struct Actor {
     settings: ActorSettings,
+    lanes: Vec<Lane>,
+    builder: BatchBuilder,
+    ready: VecDeque<TransitionBatch>,
+    metrics: ActorMetrics,
+    /// Greedy episodes since the last evaluation summary in the log.
+    eval_tally: (std::time::Instant, EpisodeStats),
+}
+
+/// A contiguous range of an actor's environments and everything kept per
+/// environment: exploration streams, n-step windows, the Q-values and
+/// actions of its last decision.
+#[derive(Debug)]
+struct Lane {
     envs: VecEnv,
     explorer: EpsilonGreedy,
     assemblers: Vec<NStepAssembler>,
@@ -248,13 +277,14 @@ pub struct Actor {
     q: Vec<f32>,
     actions: Vec<usize>,
     episode_steps: Vec<u32>,
+    results: Vec<EnvStep>,
     emitted: Vec<NStepTransition>,
-    builder: BatchBuilder,
-    ready: VecDeque<TransitionBatch>,
+    /// `actions` are chosen and not yet applied.
+    decided: bool,
+    /// The next observation id; ids step by the number of lanes, so no two
+    /// lanes hand out the same one.
     next_obs_id: u64,
-    metrics: ActorMetrics,
-    /// Greedy episodes since the last evaluation summary in the log.
-    eval_tally: (std::time::Instant, EpisodeStats),
+    id_stride: u64,
 }
 
 /// How often an evaluating actor logs its running outcome rates.
@@ -266,52 +296,34 @@ impl Actor {
         let mut env_config = EnvConfig::for_actions(settings.action_set);
         env_config.gamma = settings.gamma;
         env_config.collision_reward = settings.collision_reward;
-        let training = settings.mode.is_training();
-        let encoding = ObservationEncoding::SparseF32;
-        let envs = VecEnv::new(
-            Arc::clone(&settings.scenario),
-            env_config,
-            settings.envs,
-            settings.seed,
-            training.then_some(encoding),
-        )?;
-        let m = envs.len();
-        let num_actions = envs.num_actions();
-        let builder = BatchBuilder::new(envs.batch_spec(), num_actions as u32, encoding);
+        let m = settings.envs.max(1);
+        // Where the lanes start and end: two halves, or one lane of all.
+        let bounds = if settings.pipeline && m >= 2 {
+            vec![0, m / 2, m]
+        } else {
+            vec![0, m]
+        };
+        let n = bounds.len() as u64 - 1;
+        let lanes = bounds
+            .windows(2)
+            .enumerate()
+            .map(|(k, w)| Lane::new(&settings, env_config, w[0]..w[1], (k as u64, n)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let lane = &lanes[0].envs;
+        let builder = BatchBuilder::new(
+            lane.batch_spec(),
+            lane.num_actions() as u32,
+            ObservationEncoding::SparseF32,
+        );
         metrics.epsilon.set(settings.mode.epsilon());
-        let mut explorer = EpsilonGreedy::new(settings.mode, m, settings.seed);
-        if let Some(action) = settings
-            .action_set
-            .absorbing_go()
-            .filter(|_| settings.explore_go_once)
-        {
-            explorer = explorer.with_absorbing_go(AbsorbingGo {
-                action,
-                step_limit: settings.scenario.spec().step_limit,
-            });
-        }
-        let mut actor = Self {
-            explorer,
-            assemblers: vec![NStepAssembler::new(settings.n_step, settings.gamma); m],
-            current: vec![None; m],
-            q: vec![0.0; m * num_actions],
-            actions: vec![0; m],
-            episode_steps: vec![0; m],
-            emitted: Vec::new(),
+        Ok(Self {
+            lanes,
             builder,
             ready: VecDeque::new(),
-            next_obs_id: 0,
             metrics,
             eval_tally: (std::time::Instant::now(), EpisodeStats::default()),
-            envs,
             settings,
-        };
-        if training {
-            for i in 0..m {
-                actor.current[i] = Some(actor.intern(i, false));
-            }
-        }
-        Ok(actor)
+        })
     }
 
     /// The settings.
@@ -319,9 +331,19 @@ impl Actor {
         &self.settings
     }
 
-    /// The environments.
-    pub fn envs(&self) -> &VecEnv {
-        &self.envs
+    /// Values in one observation.
+    pub fn obs_len(&self) -> usize {
+        self.lanes[0].envs.obs_len()
+    }
+
+    /// Size of the action set.
+    pub fn num_actions(&self) -> usize {
+        self.lanes[0].envs.num_actions()
+    }
+
+    /// Lanes the environments are acted on in (2 when pipelined).
+    pub fn lanes(&self) -> usize {
+        self.lanes.len()
     }
 
     /// The metrics handles.
@@ -329,87 +351,67 @@ impl Actor {
         &self.metrics
     }
 
-    /// One vectorized step: Q-values of every environment's observation in
-    /// one call of `values`, epsilon-greedy actions, a parallel environment
-    /// step, n-step transitions (training mode).
+    /// One vectorized step: every environment's Q-values (one call of
+    /// `values` per lane), epsilon-greedy actions, parallel environment
+    /// steps, n-step transitions (training mode).
     pub fn step(&mut self, values: &mut dyn ActionValues) -> Result<StepSummary, ActorError> {
-        let m = self.envs.len();
-        let a = self.envs.num_actions();
-        if values.obs_len() != self.envs.obs_len() || values.num_actions() != a {
+        let (obs_len, a) = (self.obs_len(), self.num_actions());
+        if values.obs_len() != obs_len || values.num_actions() != a {
             return Err(ActorError::Values(format!(
                 "the network reads {} values and scores {} actions; the environments give {} ({}) and take {} ({})",
                 values.obs_len(),
                 values.num_actions(),
-                self.envs.obs_len(),
-                self.envs.batch_spec(),
+                obs_len,
+                self.lanes[0].envs.batch_spec(),
                 a,
                 self.settings.action_set
             )));
         }
-        if values.reads_sparse() {
-            values.q_values_sparse(self.envs.sparse_observations(), &mut self.q)
-        } else {
-            values.q_values(self.envs.observations(), m, &mut self.q)
-        }
-        .map_err(|e| ActorError::Values(e.to_string()))?;
         let training = self.settings.mode.is_training();
-        if training {
-            for i in 0..m {
-                if let Some(obs) = self.current[i].take() {
-                    self.assemblers[i].begin(obs, &self.q[i * a..(i + 1) * a], &mut self.emitted);
-                }
-            }
-        }
-        for (i, steps) in self.episode_steps.iter_mut().enumerate() {
-            *steps = self.envs.env(i).map_or(0, crossroads_sim::Env::steps);
-        }
-        self.explorer
-            .choose(&self.q, a, &self.episode_steps, &mut self.actions);
-        if training && self.settings.cut_at_exploration {
-            // n-step returns follow the greedy policy: a window ends
-            // (bootstrapping) before an exploratory action.
-            for i in 0..m {
-                if !self.explorer.was_greedy(i) {
-                    self.assemblers[i].cut(&mut self.emitted);
-                }
-            }
-        }
-        let results = self.envs.step(&self.actions)?.to_vec();
-
-        let mut summary = StepSummary {
-            decisions: m as u64,
-            ..StepSummary::default()
+        let cut = training && self.settings.cut_at_exploration;
+        let mut done = Recorded {
+            training,
+            mode: if training { "train" } else { "eval" },
+            scenario: self.settings.scenario.name(),
+            metrics: &self.metrics,
+            eval_tally: &mut self.eval_tally.1,
+            summary: StepSummary::default(),
         };
-        let mode = if training { "train" } else { "eval" };
-        for (i, r) in results.iter().enumerate() {
-            summary.sim_steps += u64::from(r.steps);
-            if let Some(end) = r.episode {
-                self.metrics.episode(mode, &end);
-                tracing::debug!(scenario = self.settings.scenario.name(), mode, outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "episode");
-                if !training {
-                    self.eval_tally.1.record(&end);
+        match self.lanes.as_mut_slice() {
+            [lane] => {
+                lane.decide(values, training, cut)?;
+                lane.apply()?;
+                lane.record(&mut done);
+            }
+            [first, second] => {
+                if !second.decided {
+                    second.decide(values, training, cut)?;
                 }
-                summary.episodes.push(end);
+                let mut stepped = Ok(());
+                rayon::in_place_scope(|s| {
+                    s.spawn(|_| stepped = second.apply());
+                    first.decide(values, training, cut)
+                })?;
+                stepped?;
+                let mut stepped = Ok(());
+                rayon::in_place_scope(|s| {
+                    s.spawn(|_| stepped = first.apply());
+                    second.record(&mut done);
+                    second.decide(values, training, cut)
+                })?;
+                stepped?;
+                first.record(&mut done);
             }
-            if training {
-                let action = self.actions[i];
-                let terminal = r.done.then(|| self.intern(i, true));
-                self.assemblers[i].record(
-                    action as u32,
-                    self.q[i * a + action],
-                    r.reward,
-                    r.steps,
-                    terminal,
-                    &mut self.emitted,
-                );
-                self.current[i] = Some(self.intern(i, false));
-            }
+            _ => unreachable!("an actor has one or two lanes"),
         }
-        summary.transitions = self.emitted.len() as u64;
-        for t in self.emitted.drain(..) {
-            self.builder.push(&t);
-            if self.builder.len() >= self.settings.batch_size {
-                self.ready.push_back(self.builder.take());
+        let mut summary = done.summary;
+        for lane in &mut self.lanes {
+            summary.transitions += lane.emitted.len() as u64;
+            for t in lane.emitted.drain(..) {
+                self.builder.push(&t);
+                if self.builder.len() >= self.settings.batch_size {
+                    self.ready.push_back(self.builder.take());
+                }
             }
         }
         self.metrics.stepped(summary.sim_steps, summary.decisions);
@@ -508,6 +510,152 @@ impl Actor {
         }
         (!self.builder.is_empty()).then(|| self.builder.take())
     }
+}
+
+/// Where a lane's finished steps are counted: the step's summary, the
+/// episode metrics, the evaluation tally.
+struct Recorded<'a> {
+    training: bool,
+    mode: &'static str,
+    scenario: &'a str,
+    metrics: &'a ActorMetrics,
+    eval_tally: &'a mut EpisodeStats,
+    summary: StepSummary,
+}
+
+impl Lane {
+    /// Environments `range` of the actor `settings` describe, reset (and
+    /// their first observations interned when training); lane `k` of `n`.
+    fn new(
+        settings: &ActorSettings,
+        env_config: EnvConfig,
+        range: Range<usize>,
+        (k, n): (u64, u64),
+    ) -> Result<Self, ActorError> {
+        let training = settings.mode.is_training();
+        let envs = VecEnv::with_range(
+            Arc::clone(&settings.scenario),
+            env_config,
+            range.clone(),
+            settings.seed,
+            training.then_some(ObservationEncoding::SparseF32),
+        )?;
+        let mut explorer = EpsilonGreedy::for_range(settings.mode, range, settings.seed);
+        if let Some(action) = settings
+            .action_set
+            .absorbing_go()
+            .filter(|_| settings.explore_go_once)
+        {
+            explorer = explorer.with_absorbing_go(AbsorbingGo {
+                action,
+                step_limit: settings.scenario.spec().step_limit,
+            });
+        }
+        let m = envs.len();
+        let mut lane = Self {
+            explorer,
+            assemblers: vec![NStepAssembler::new(settings.n_step, settings.gamma); m],
+            current: vec![None; m],
+            q: vec![0.0; m * envs.num_actions()],
+            actions: vec![0; m],
+            episode_steps: vec![0; m],
+            results: Vec::with_capacity(m),
+            emitted: Vec::new(),
+            decided: false,
+            next_obs_id: k,
+            id_stride: n,
+            envs,
+        };
+        if training {
+            for i in 0..m {
+                lane.current[i] = Some(lane.intern(i, false));
+            }
+        }
+        Ok(lane)
+    }
+
+    /// Q-values of the current observations in one call of `values`, then
+    /// one epsilon-greedy action per environment; opens n-step windows
+    /// (training) and cuts them before exploratory actions (`cut`).
+    fn decide(
+        &mut self,
+        values: &mut dyn ActionValues,
+        training: bool,
+        cut: bool,
+    ) -> Result<(), ActorError> {
+        let m = self.envs.len();
+        let a = self.envs.num_actions();
+        if values.reads_sparse() {
+            values.q_values_sparse(self.envs.sparse_observations(), &mut self.q)
+        } else {
+            values.q_values(self.envs.observations(), m, &mut self.q)
+        }
+        .map_err(|e| ActorError::Values(e.to_string()))?;
+        if training {
+            for i in 0..m {
+                if let Some(obs) = self.current[i].take() {
+                    self.assemblers[i].begin(obs, &self.q[i * a..(i + 1) * a], &mut self.emitted);
+                }
+            }
+        }
+        for (i, steps) in self.episode_steps.iter_mut().enumerate() {
+            *steps = self.envs.env(i).map_or(0, crossroads_sim::Env::steps);
+        }
+        self.explorer
+            .choose(&self.q, a, &self.episode_steps, &mut self.actions);
+        if cut {
+            // n-step returns follow the greedy policy: a window ends
+            // (bootstrapping) before an exploratory action.
+            for i in 0..m {
+                if !self.explorer.was_greedy(i) {
+                    self.assemblers[i].cut(&mut self.emitted);
+                }
+            }
+        }
+        self.decided = true;
+        Ok(())
+    }
+
+    /// Steps every environment with its chosen action (on the rayon pool).
+    fn apply(&mut self) -> Result<(), ActorError> {
+        let results = self.envs.step(&self.actions)?;
+        self.results.clear();
+        self.results.extend_from_slice(results);
+        self.decided = false;
+        Ok(())
+    }
+
+    /// Counts the last [`Lane::apply`] into `done` and, when training,
+    /// records each environment's step in its n-step window.
+    fn record(&mut self, done: &mut Recorded<'_>) {
+        let a = self.envs.num_actions();
+        done.summary.decisions += self.results.len() as u64;
+        for i in 0..self.results.len() {
+            let r = self.results[i];
+            done.summary.sim_steps += u64::from(r.steps);
+            if let Some(end) = r.episode {
+                done.metrics.episode(done.mode, &end);
+                tracing::debug!(scenario = done.scenario, mode = done.mode, outcome = ?end.outcome, time_s = end.time_s, brake_s = end.brake_time_s, seed = end.seed, "episode");
+                if !done.training {
+                    done.eval_tally.record(&end);
+                }
+                done.summary.episodes.push(end);
+            }
+            if done.training {
+                let action = self.actions[i];
+                let terminal = r.done.then(|| self.intern(i, true));
+                self.assemblers[i].record(
+                    action as u32,
+                    self.q[i * a + action],
+                    r.reward,
+                    r.steps,
+                    terminal,
+                    &mut self.emitted,
+                );
+                self.current[i] = Some(self.intern(i, false));
+            }
+        }
+    }
 
     fn intern(&mut self, i: usize, terminal: bool) -> ObsRef {
         let bytes = if terminal {
@@ -516,7 +664,7 @@ impl Actor {
             self.envs.take_encoded(i)
         };
         let id = self.next_obs_id;
-        self.next_obs_id += 1;
+        self.next_obs_id += self.id_stride;
         Arc::new(EncodedObs { id, bytes })
     }
 }

@@ -153,6 +153,8 @@ pub struct AbsorbingGo {
 #[derive(Debug, Clone)]
 pub struct EpsilonGreedy {
     mode: Mode,
+    /// The actor's index of this one's environment 0.
+    first: usize,
     rngs: Vec<Xoshiro256PlusPlus>,
     go: Option<AbsorbingGo>,
     go_at: Vec<Option<u32>>,
@@ -163,11 +165,21 @@ impl EpsilonGreedy {
     /// Streams for `envs` environments; stream `i` is seeded from
     /// `seed` and `i`. Random actions are uniform over all actions.
     pub fn new(mode: Mode, envs: usize, seed: u64) -> Self {
-        let rngs = (0..envs as u64)
-            .map(|i| Xoshiro256PlusPlus::seed_from_u64(crossroads_sim::policy_seed(seed, i)))
+        Self::for_range(mode, 0..envs, seed)
+    }
+
+    /// The streams and epsilons of environments `range` of a
+    /// [`EpsilonGreedy::new`] of `range.end`: environment `k` here is
+    /// environment `range.start + k` there.
+    pub fn for_range(mode: Mode, range: std::ops::Range<usize>, seed: u64) -> Self {
+        let first = range.start;
+        let envs = range.len();
+        let rngs = range
+            .map(|i| Xoshiro256PlusPlus::seed_from_u64(crossroads_sim::policy_seed(seed, i as u64)))
             .collect();
         Self {
             mode,
+            first,
             rngs,
             go: None,
             go_at: vec![None; envs],
@@ -196,7 +208,7 @@ impl EpsilonGreedy {
     /// episode has taken (0 at its first decision).
     pub fn choose(&mut self, q: &[f32], num_actions: usize, steps: &[u32], actions: &mut [usize]) {
         for (i, row) in q.chunks_exact(num_actions).enumerate().take(actions.len()) {
-            let epsilon = self.mode.epsilon_of(i).clamp(0.0, 1.0);
+            let epsilon = self.mode.epsilon_of(self.first + i).clamp(0.0, 1.0);
             let best = argmax(row);
             let rng = &mut self.rngs[i];
             let step = steps.get(i).copied().unwrap_or(0);

@@ -47,7 +47,7 @@ pub struct ActorParts {
 impl ActorParts {
     /// Actor `index` of the run `config` describes, reporting to `metrics`.
     pub fn new(config: &Config, index: u32, metrics: ActorMetrics) -> Result<Self, ActorError> {
-        let settings = ActorSettings::from_config(&config.sim, &config.actor, index)?;
+        let mut settings = ActorSettings::from_config(&config.sim, &config.actor, index)?;
         let spec = network_spec(&config.sim, &config.learner).map_err(|e| {
             ActorError::Config(format!("the [learner] network the actor starts from: {e}"))
         })?;
@@ -57,9 +57,14 @@ impl ActorParts {
         net.set_precision(precision);
         tracing::info!(%precision, "actor network number format");
         let weights = WeightsSlot::new();
+        let network = LiveNetwork::new(net, &weights, metrics.clone())?;
+        // Two lanes pay where the forward pass is cheap beside the
+        // simulators (plain Rust); a libtorch pass (conv) costs more at half
+        // the batch than the overlap saves.
+        settings.pipeline &= network.is_native();
         Ok(Self {
-            actor: Actor::new(settings, metrics.clone())?,
-            network: LiveNetwork::new(net, &weights, metrics),
+            actor: Actor::new(settings, metrics)?,
+            network,
             weights,
         })
     }

@@ -1,6 +1,7 @@
 //! The one thing the actor needs from a Q-network: batched action values.
 
 use crossroads_model::QNetwork;
+use crossroads_types::codec;
 
 /// Error of an [`ActionValues`] implementation (a forward pass that failed,
 /// weights that do not fit).
@@ -44,11 +45,8 @@ pub trait ActionValues {
         let len = self.obs_len();
         let mut dense = vec![0.0; rows.len() * len];
         for (r, (row, pairs)) in dense.chunks_exact_mut(len.max(1)).zip(rows).enumerate() {
-            for &(i, v) in pairs {
-                *row.get_mut(i as usize).ok_or_else(|| {
-                    format!("observation {r} has a value at {i}, beyond its {len} values")
-                })? = v;
-            }
+            codec::spread_pairs(pairs.iter().copied(), row)
+                .map_err(|e| format!("observation {r}: {e}"))?;
         }
         self.q_values(&dense, rows.len(), out)
     }

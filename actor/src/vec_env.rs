@@ -92,15 +92,29 @@ impl VecEnv {
         seed: u64,
         encoding: Option<ObservationEncoding>,
     ) -> Result<Self, ActorError> {
-        if envs == 0 {
+        Self::with_range(scenario, config, 0..envs, seed, encoding)
+    }
+
+    /// Environments `range` of a [`VecEnv::new`] of `range.end`: its
+    /// environment `k` is environment `range.start + k` there, with the same
+    /// seeds (an actor's lanes split its environments this way).
+    pub fn with_range(
+        scenario: Arc<Scenario>,
+        config: EnvConfig,
+        range: std::ops::Range<usize>,
+        seed: u64,
+        encoding: Option<ObservationEncoding>,
+    ) -> Result<Self, ActorError> {
+        if range.is_empty() {
             return Err(ActorError::Config(
                 "at least one environment is needed".to_owned(),
             ));
         }
-        let slots: Vec<Slot> = (0..envs as u64)
+        let envs = range.len();
+        let slots: Vec<Slot> = range
             .map(|i| Slot {
                 env: Env::new(Arc::clone(&scenario), config),
-                seed: episode_seed(seed, i),
+                seed: episode_seed(seed, i as u64),
                 episodes: 0,
                 episode_seed: 0,
                 encoded: Vec::new(),
@@ -179,10 +193,8 @@ impl VecEnv {
         if !self.dense_fresh {
             let len = self.spec.len();
             for (row, pairs) in self.dense.chunks_exact_mut(len).zip(&self.sparse) {
-                row.fill(0.0);
-                for &(i, v) in pairs {
-                    row[i as usize] = v;
-                }
+                // The simulators write indices inside their observation.
+                let _ = codec::spread_pairs(pairs.iter().copied(), row);
             }
             self.dense_fresh = true;
         }

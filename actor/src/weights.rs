@@ -17,7 +17,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use crossroads_common::{Backoff, Shutdown};
 use crossroads_config::ActorTransport;
 use crossroads_config::TransportConfig;
-use crossroads_model::QNetwork;
+use crossroads_model::{NativeMlp, QNetwork};
 use crossroads_transport::weights_shm::ShmWeightsSubscriber;
 use crossroads_transport::{ClientSecurity, LearnerClient, WeightsSlot, WeightsWatch};
 use crossroads_types::Weights;
@@ -32,6 +32,12 @@ use crate::worker::Worker;
 /// version in use and its age, and each forward pass and its time, to
 /// [`ActorMetrics`].
 ///
+/// An MLP network in f32 is computed by [`NativeMlp`] over a copy of its
+/// weights, made again for each version applied (a millisecond for the
+/// default network): at the actor's batch sizes libtorch's per-operator
+/// overhead costs more than the arithmetic. Other networks (conv, bf16)
+/// run in libtorch.
+///
 /// Weights of another architecture with the same input length and action
 /// count replace the network; weights that cannot drive these environments
 /// (another observation or action set) are an error naming both, which
@@ -39,6 +45,8 @@ use crate::worker::Worker;
 /// would fill the replay with useless transitions.
 pub struct LiveNetwork {
     net: QNetwork,
+    /// `net`'s forward pass in plain Rust, where it has one.
+    native: Option<NativeMlp>,
     version: u64,
     applied_at: (Instant, Option<i64>),
     slot: WeightsWatch,
@@ -51,6 +59,7 @@ impl std::fmt::Debug for LiveNetwork {
         f.debug_struct("LiveNetwork")
             .field("spec", self.net.spec())
             .field("version", &self.version)
+            .field("native", &self.native.is_some())
             .field("applied", &self.applied)
             .finish_non_exhaustive()
     }
@@ -59,16 +68,27 @@ impl std::fmt::Debug for LiveNetwork {
 impl LiveNetwork {
     /// Starts from `net` (version 0, e.g. built from `[learner]` with the
     /// learner's seed) and follows `slot`.
-    pub fn new(net: QNetwork, slot: &WeightsSlot, metrics: ActorMetrics) -> Self {
+    pub fn new(
+        net: QNetwork,
+        slot: &WeightsSlot,
+        metrics: ActorMetrics,
+    ) -> Result<Self, ActorError> {
         metrics.weights(0, 0.0);
-        Self {
+        Ok(Self {
+            native: native_of(&net)?,
             net,
             version: 0,
             applied_at: (Instant::now(), None),
             slot: slot.watch(),
             metrics,
             applied: 0,
-        }
+        })
+    }
+
+    /// Whether the forward pass runs in plain Rust ([`NativeMlp`]) rather
+    /// than libtorch.
+    pub fn is_native(&self) -> bool {
+        self.native.is_some()
     }
 
     /// The version in use (0: the initial network).
@@ -130,6 +150,7 @@ impl LiveNetwork {
             net.set_precision(self.net.precision());
             self.net = net;
         }
+        self.native = native_of(&self.net)?;
         self.version = w.version;
         self.applied += 1;
         self.applied_at = (Instant::now(), Some(w.published_unix_ms));
@@ -140,6 +161,12 @@ impl LiveNetwork {
         );
         Ok(())
     }
+}
+
+/// The plain-Rust forward pass of `net`, where it has one.
+fn native_of(net: &QNetwork) -> Result<Option<NativeMlp>, ActorError> {
+    NativeMlp::of(net)
+        .map_err(|e| ActorError::Values(format!("copying the network's weights: {e}")))
 }
 
 impl LiveNetwork {
@@ -164,7 +191,10 @@ impl ActionValues for LiveNetwork {
     fn q_values(&mut self, obs: &[f32], n: usize, out: &mut [f32]) -> Result<(), ValuesError> {
         self.refresh_for_values()?;
         let started = Instant::now();
-        let result = ActionValues::q_values(&mut self.net, obs, n, out);
+        let result = match &mut self.native {
+            Some(native) => native.q_values(obs, n, out).map_err(ValuesError::from),
+            None => ActionValues::q_values(&mut self.net, obs, n, out),
+        };
         self.metrics.forward_pass(started.elapsed().as_secs_f64());
         result
     }
@@ -180,7 +210,10 @@ impl ActionValues for LiveNetwork {
     ) -> Result<(), ValuesError> {
         self.refresh_for_values()?;
         let started = Instant::now();
-        let result = ActionValues::q_values_sparse(&mut self.net, rows, out);
+        let result = match &mut self.native {
+            Some(native) => native.q_values_sparse(rows, out).map_err(ValuesError::from),
+            None => ActionValues::q_values_sparse(&mut self.net, rows, out),
+        };
         self.metrics.forward_pass(started.elapsed().as_secs_f64());
         result
     }

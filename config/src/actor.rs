@@ -70,6 +70,14 @@ pub struct ActorConfig {
     /// action, so that returns follow the greedy policy. Off: returns sum
     /// over whatever was taken.
     pub cut_at_exploration: bool,
+    /// Act on the environments in two halves, one half's forward pass
+    /// beside the other half's simulation step, so the simulators and the
+    /// network do not wait for each other: where the forward pass runs in
+    /// plain Rust (an MLP in f32) and there are at least 2 environments. A
+    /// libtorch forward pass (conv) keeps one lane: at half the batch it
+    /// costs more than the overlap saves. Off: one forward pass for all,
+    /// then one step for all.
+    pub pipeline: bool,
     /// Greedy evaluation: no exploration, no transitions pushed; episodes
     /// are reported to the metrics (and the log: each at debug level,
     /// outcome rates every 30 s at info).
@@ -104,6 +112,7 @@ impl Default for ActorConfig {
             ladder_over_envs: true,
             explore_go_once: true,
             cut_at_exploration: true,
+            pipeline: true,
             eval: false,
             transport: ActorTransport::Grpc,
             weights: None,

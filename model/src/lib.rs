@@ -13,7 +13,8 @@
 //! skip the zeros of a TTG observation (an MLP's: an embedding bag over its
 //! transposed weight). A network computes its trunk in a [`Precision`]:
 //! fp32, or bf16 over fp32 master weights where the CPU has matrix units
-//! for it.
+//! for it. [`NativeMlp`] is an MLP's forward pass in plain Rust over a copy
+//! of its weights, for the actor's small batches.
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
 //! and PyTorch. [`network_spec`] is the network a run's `[sim]` and
@@ -21,6 +22,7 @@
 
 mod config;
 mod error;
+mod native;
 mod network;
 mod observations;
 mod precision;
@@ -32,6 +34,7 @@ pub use crossroads_types::spec::{
     num_actions_of,
 };
 pub use error::ModelError;
+pub use native::NativeMlp;
 pub use network::{QBatch, QNetwork};
 pub use observations::{Observations, SparseRows};
 pub use precision::{Precision, Work, cpu_has_amx_bf16};

@@ -2,6 +2,7 @@
 //! variables, with the batched inference actors use and the copies the
 //! learner's target network needs.
 
+use crossroads_types::codec;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use crate::ModelError;
@@ -11,7 +12,7 @@ use crate::spec::{NetworkSpec, TrunkKind};
 use crate::weights::{self, WeightsMeta};
 
 /// The variable an MLP trunk's first layer stores transposed.
-const FIRST_WEIGHT: &str = "trunk.0.weight";
+pub(crate) const FIRST_WEIGHT: &str = "trunk.0.weight";
 
 /// The first layer of an MLP trunk. Its weight is stored transposed,
 /// `[inputs, hidden]`, so that over sparse observations the layer is the
@@ -468,14 +469,27 @@ impl QNetwork {
             });
         }
         let width = self.spec.input_len() as usize;
+        if !self.reads_sparse() {
+            // Dense rows straight from the pairs; `infer` checks the values.
+            let mut dense = vec![0.0; rows.len() * width];
+            for (r, (row, pairs)) in dense.chunks_exact_mut(width).zip(rows).enumerate() {
+                codec::spread_pairs(pairs.as_ref().iter().copied(), row).map_err(|e| {
+                    let index = match e {
+                        codec::CodecError::IndexRange { index, .. } => index as usize,
+                        _ => width,
+                    };
+                    ModelError::Index {
+                        row: r,
+                        index,
+                        width,
+                    }
+                })?;
+            }
+            return self.infer(&dense, rows.len());
+        }
         let sparse =
             SparseRows::from_pairs(rows.iter().map(|r| r.as_ref().iter().copied()), width)?;
-        let x = if self.reads_sparse() {
-            Observations::Sparse(sparse)
-        } else {
-            Observations::Dense(sparse.to_dense())
-        };
-        self.infer_observations(&x)
+        self.infer_observations(&Observations::Sparse(sparse))
     }
 
     fn infer_observations(&self, x: &Observations) -> Result<QBatch, ModelError> {

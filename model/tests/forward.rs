@@ -1,7 +1,8 @@
 //! A forward pass through libtorch on CPU with known weights.
 
 use crossroads_model::{
-    NetworkSpec, ObservationLayout, Observations, Precision, QNetwork, TrunkKind, weights,
+    NativeMlp, NetworkSpec, ObservationLayout, Observations, Precision, QNetwork, TrunkKind,
+    weights,
 };
 use tch::{Device, Kind, Tensor};
 
@@ -487,4 +488,75 @@ fn auto_precision_is_bf16_only_for_training_a_conv_trunk_on_amx() {
             );
         }
     }
+}
+
+/// The plain-Rust forward pass gives libtorch's Q-values (up to the order
+/// of float additions) for one to three hidden layers, from pairs and from
+/// dense rows, on the network's own weights and after they change; it
+/// declines networks it does not compute and names bad input.
+#[test]
+fn the_native_mlp_gives_the_networks_q_values() {
+    let close = |a: &[f32], b: &[f32], what: &str| {
+        assert_eq!(a.len(), b.len(), "{what}");
+        for (x, y) in a.iter().zip(b) {
+            assert!(
+                (x - y).abs() <= 1e-5 * (1.0 + y.abs()),
+                "{what}: {a:?} vs {b:?}"
+            );
+        }
+    };
+    for hidden in [vec![16], vec![32, 16], vec![24, 12, 8]] {
+        let mut net = QNetwork::new(plain_mlp(41, hidden.clone(), 4), 9).expect("valid spec");
+        let rows = 6;
+        let values = sparse_rows(41, rows);
+        let pairs: Vec<Vec<(u32, f32)>> = values
+            .chunks_exact(41)
+            .map(|r| {
+                r.iter()
+                    .enumerate()
+                    .filter(|(_, v)| **v != 0.0)
+                    .map(|(i, v)| (i as u32, *v))
+                    .collect()
+            })
+            .collect();
+        for round in 0..2 {
+            let expected = net.infer(&values, rows).expect("libtorch").q;
+            let mut native = NativeMlp::of(&net).expect("copy").expect("an f32 MLP");
+            assert_eq!((native.obs_len(), native.num_actions()), (41, 4));
+            let mut q = vec![f32::NAN; rows * 4];
+            native.q_values_sparse(&pairs, &mut q).expect("pairs");
+            close(&q, &expected, &format!("{hidden:?} round {round}, pairs"));
+            let mut q = vec![f32::NAN; rows * 4];
+            native.q_values(&values, rows, &mut q).expect("dense");
+            close(&q, &expected, &format!("{hidden:?} round {round}, dense"));
+            // New weights (another seed's): a new copy follows them.
+            let other = QNetwork::new(plain_mlp(41, hidden.clone(), 4), 10 + round).expect("spec");
+            net.copy_from(&other).expect("same spec");
+        }
+        let mut native = NativeMlp::of(&net).expect("copy").expect("an f32 MLP");
+        let mut q = vec![0.0; 2 * 4];
+        let err = native
+            .q_values_sparse(&[vec![(3, 1.0)], vec![(41, 1.0)]], &mut q)
+            .expect_err("an index past the end");
+        assert!(err.to_string().contains("observation 1"), "{err}");
+        let err = native
+            .q_values_sparse(&[vec![(3, f32::NAN)]], &mut q)
+            .expect_err("NaN");
+        assert!(err.to_string().contains("NaN"), "{err}");
+        assert!(
+            native.q_values(&values[..40], 1, &mut q).is_err(),
+            "a short row"
+        );
+    }
+    let conv = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 16]).expect("spec");
+    let conv = QNetwork::new(conv, 1).expect("conv network");
+    assert!(NativeMlp::of(&conv).expect("no copy").is_none(), "conv");
+    let mut bf16 = QNetwork::new(plain_mlp(41, vec![16], 4), 1).expect("spec");
+    bf16.set_precision(Precision::Bf16);
+    assert!(NativeMlp::of(&bf16).expect("no copy").is_none(), "bf16");
+    let linear = QNetwork::new(plain_mlp(41, vec![], 4), 1).expect("no hidden layer");
+    assert!(
+        NativeMlp::of(&linear).expect("no copy").is_none(),
+        "no hidden layer"
+    );
 }

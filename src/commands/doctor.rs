@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use crossroads_config::{Config, ConfigLoader, SimConfig};
 use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second};
-use crossroads_model::{NetworkSpec, Precision, QNetwork, Work, cpu_has_amx_bf16};
+use crossroads_model::{NativeMlp, NetworkSpec, Precision, QNetwork, Work, cpu_has_amx_bf16};
 use serde::Serialize;
 use tch::Tensor;
 
@@ -52,6 +52,9 @@ struct Report {
     actor_batch: usize,
     /// Median of timed inference calls at `actor_batch`.
     actor_forward_median_ms: f64,
+    /// The actors' forward pass runs in plain Rust (`NativeMlp`: an f32
+    /// MLP), not in libtorch.
+    actor_forward_native: bool,
     /// Transitions per learner update (`learner.batch_size`).
     learner_batch: u32,
     /// Median of timed forward passes (no gradient) at `learner_batch`.
@@ -151,9 +154,11 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     .context("timing learner updates")?;
     // The actors' call and the learner's forward pass, each in the
     // format its role computes in.
+    let mut actor_native = false;
     let mut forwards = || -> anyhow::Result<(f64, f64)> {
         net.set_precision(acting);
-        let actor = time_inference(&net, actor_batch)?;
+        let (actor, native) = time_inference(&net, actor_batch)?;
+        actor_native = native;
         net.set_precision(training);
         Ok((actor, time_forward(&net, learner_batch as usize)?))
     };
@@ -184,6 +189,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         config: source,
         actor_batch,
         actor_forward_median_ms: actor_forward,
+        actor_forward_native: actor_native,
         learner_batch,
         learner_forward_median_ms: learner_forward,
         learner_update_median_ms: 1e3 / update.updates_per_sec,
@@ -210,8 +216,14 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
             if report.amx_bf16 { "yes" } else { "no" }
         );
         println!(
-            "  actor forward    {:.3} ms median (batch {}, actor.envs)",
-            report.actor_forward_median_ms, report.actor_batch
+            "  actor forward    {:.3} ms median (batch {}, actor.envs; {})",
+            report.actor_forward_median_ms,
+            report.actor_batch,
+            if report.actor_forward_native {
+                "plain Rust"
+            } else {
+                "libtorch"
+            }
         );
         println!(
             "  learner forward  {:.3} ms median (batch {}, learner.batch_size)",
@@ -267,13 +279,31 @@ fn median_ms(mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
     Ok(median(&times))
 }
 
-/// The actors' call: [`QNetwork::infer`] on `batch` observations.
-fn time_inference(net: &QNetwork, batch: usize) -> anyhow::Result<f64> {
+/// The actors' call on `batch` observations: [`NativeMlp`] where the network has one
+/// (as `LiveNetwork` uses it), else [`QNetwork::infer`]; whether it was native.
+fn time_inference(net: &QNetwork, batch: usize) -> anyhow::Result<(f64, bool)> {
     let obs = observations(net.spec(), batch);
-    median_ms(|| {
+    if let Some(mut native) = NativeMlp::of(net)? {
+        // As the actors call it: each observation's non-zero values.
+        let pairs: Vec<Vec<(u32, f32)>> = obs
+            .chunks_exact(native.obs_len())
+            .map(|row| {
+                row.iter()
+                    .enumerate()
+                    .filter(|(_, v)| **v != 0.0)
+                    .map(|(i, v)| (i as u32, *v))
+                    .collect()
+            })
+            .collect();
+        let mut q = vec![0.0; batch * native.num_actions()];
+        let ms = median_ms(|| Ok(native.q_values_sparse(&pairs, &mut q)?))?;
+        return Ok((ms, true));
+    }
+    let ms = median_ms(|| {
         net.infer(&obs, batch)?;
         Ok(())
-    })
+    })?;
+    Ok((ms, false))
 }
 
 /// The learner's forward pass without a gradient (its target network's).

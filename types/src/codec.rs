@@ -152,14 +152,31 @@ pub fn encode_pairs(
             }
         }
         ObservationEncoding::DenseF32 => {
-            let start = out.len();
-            out.resize(start + len * 4, 0);
-            for &(i, v) in pairs.iter().filter(|(i, _)| (*i as usize) < len) {
-                let at = start + i as usize * 4;
-                out[at..at + 4].copy_from_slice(&v.to_le_bytes());
-            }
+            let mut row = vec![0.0; len];
+            // Out-of-range pairs are dropped, as `encode` of the row would.
+            let _ = spread_pairs(pairs.iter().copied(), &mut row);
+            encode(encoding, &row, out);
         }
     }
+}
+
+/// Writes `(index, value)` pairs into the dense row `row`: every value of
+/// the row is written, zero where no pair names it, and a later pair for the
+/// same index wins. The one place pairs become dense values (the actor's
+/// dense batch, a network that reads dense rows, [`decode_into`]). A pair
+/// past the row's end is an error naming it; the pairs before it are
+/// written, the rest are not.
+pub fn spread_pairs(
+    pairs: impl IntoIterator<Item = (u32, f32)>,
+    row: &mut [f32],
+) -> Result<(), CodecError> {
+    row.fill(0.0);
+    let len = row.len();
+    for (index, value) in pairs {
+        *row.get_mut(index as usize)
+            .ok_or(CodecError::IndexRange { index, len })? = value;
+    }
+    Ok(())
 }
 
 /// Checks that `bytes` is a valid observation of `len` values in
@@ -228,12 +245,7 @@ pub fn decode_into(
                 *v = f32_at(bytes, i * 4);
             }
         }
-        ObservationEncoding::SparseF32 => {
-            out.fill(0.0);
-            for (index, value) in sparse_pairs(bytes) {
-                out[index as usize] = value;
-            }
-        }
+        ObservationEncoding::SparseF32 => spread_pairs(sparse_pairs(bytes), out)?,
     }
     Ok(())
 }
@@ -249,6 +261,20 @@ pub fn sparse_pairs(bytes: &[u8]) -> impl Iterator<Item = (u32, f32)> + '_ {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spread_pairs_writes_every_value_and_names_an_index_past_the_end() {
+        let mut row = vec![7.0; 5];
+        spread_pairs([(1, 1.5), (3, -2.0), (3, 4.0)], &mut row).expect("in range");
+        assert_eq!(
+            row,
+            [0.0, 1.5, 0.0, 4.0, 0.0],
+            "zeros elsewhere, the later pair wins"
+        );
+        let err = spread_pairs([(0, 1.0), (5, 2.0)], &mut row).expect_err("past the end");
+        assert_eq!(err, CodecError::IndexRange { index: 5, len: 5 });
+        assert!(err.to_string().contains("index 5"), "{err}");
+    }
 
     #[test]
     fn pairs_encode_to_the_bytes_of_their_dense_values() {

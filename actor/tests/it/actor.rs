@@ -1,5 +1,6 @@
 //! The actor's core: batches of valid n-step transitions, one forward pass
-//! per step, the epsilon ladder from the config, greedy evaluation.
+//! per lane and step, two lanes acting like one, the epsilon ladder from
+//! the config, greedy evaluation.
 
 use crossroads_actor::{ActorSettings, EpisodeStats, Mode, resolve_index};
 use crossroads_common::Shutdown;
@@ -10,7 +11,7 @@ use crossroads_transport::grpc::ReplayClient;
 use crate::util::{actor, actor_config, actor_on, batches, replay_config, transport};
 
 #[test]
-fn training_fills_valid_batches_with_one_forward_pass_per_step() {
+fn training_fills_valid_batches_with_one_forward_pass_per_lane_and_step() {
     let config = actor_config(4, 32);
     let (mut a, mut values) = actor(&config, 0);
     let out = batches(&mut a, &mut values, 3);
@@ -45,9 +46,44 @@ fn training_fills_valid_batches_with_one_forward_pass_per_step() {
         (eps - mean).abs() < 1e-12,
         "a single actor of 4 environments explores with a mean {mean}, got {eps}"
     );
+    // 3 batches of 32 from 4 environments need at least 24 steps, of one
+    // forward pass per lane (2) each.
     let forward = values.calls;
-    let decisions: u64 = forward as u64 * 4;
-    assert!(decisions >= 96, "{forward} forward passes for 4 envs");
+    assert!(forward >= 48, "{forward} forward passes for 2 lanes of 2");
+}
+
+/// Pipelined, the environments are two lanes of one forward pass each per
+/// step (plus the second lane's first decision); not pipelined, one pass
+/// for all. Either way every environment acts once per step on its own
+/// seeds and random streams, so a greedy actor ends the same episodes.
+#[test]
+fn two_lanes_act_like_one_on_each_environments_seeds() {
+    let run = |pipeline: bool, envs: usize| {
+        let mut config = actor_config(envs, 8);
+        config.eval = true;
+        config.pipeline = pipeline;
+        let (mut a, mut values) = actor(&config, 0);
+        let mut ended = Vec::new();
+        for _ in 0..300 {
+            let summary = a.step(&mut values).expect("step");
+            assert_eq!(summary.decisions, envs as u64);
+            ended.extend(
+                summary
+                    .episodes
+                    .iter()
+                    .map(|e| (e.seed, e.steps, e.outcome)),
+            );
+        }
+        ended.sort_by_key(|e| (e.0, e.1));
+        (a.lanes(), values.calls, ended)
+    };
+    let (lanes, calls, pipelined) = run(true, 5);
+    assert_eq!((lanes, calls), (2, 2 * 300 + 1));
+    let (lanes, calls, one_lane) = run(false, 5);
+    assert_eq!((lanes, calls), (1, 300));
+    assert!(!pipelined.is_empty(), "episodes end");
+    assert_eq!(pipelined, one_lane);
+    assert_eq!(run(true, 1).0, 1, "one environment is one lane");
 }
 
 #[test]

@@ -73,7 +73,7 @@ pub fn actor_on(sim: &SimConfig, config: &ActorConfig, index: u32) -> (Actor, Li
     let settings = ActorSettings::from_config(sim, config, index).expect("settings");
     let metrics = ActorMetrics::new(None, &sim.scenario).expect("metrics");
     let actor = Actor::new(settings, metrics).expect("actor");
-    let values = LinearValues::new(actor.envs().obs_len(), actor.envs().num_actions());
+    let values = LinearValues::new(actor.obs_len(), actor.num_actions());
     (actor, values)
 }
 

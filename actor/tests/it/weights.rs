@@ -32,7 +32,7 @@ fn live_actor(slot: &WeightsSlot) -> (Actor, LiveNetwork, ActorMetrics) {
     let metrics = ActorMetrics::new(None, "left").expect("metrics");
     let actor = Actor::new(settings, metrics.clone()).expect("actor");
     let net = QNetwork::new(small_spec(), 1).expect("network");
-    let live = LiveNetwork::new(net, slot, metrics.clone());
+    let live = LiveNetwork::new(net, slot, metrics.clone()).expect("live network");
     (actor, live, metrics)
 }
 
@@ -280,5 +280,59 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
     assert_eq!(live.network().spec(), &wider);
     assert!(!slot.offer(Weights::from_safetensors(bytes(5), 50, 0).expect("weights")));
     assert_eq!(slot.version(), 6);
-    assert_eq!(live.obs_len(), actor.envs().obs_len());
+    assert_eq!(live.obs_len(), actor.obs_len());
+}
+
+/// An MLP in f32 runs in plain Rust; each version applied is copied again,
+/// so the Q-values are always those of the weights in use (libtorch's, up
+/// to the order of float additions); a conv network from the learner runs
+/// in libtorch.
+#[test]
+fn the_native_forward_pass_follows_each_version() {
+    let slot = WeightsSlot::new();
+    let metrics = ActorMetrics::new(None, "left").expect("metrics");
+    let mut live = LiveNetwork::new(
+        QNetwork::new(small_spec(), 1).expect("network"),
+        &slot,
+        metrics,
+    )
+    .expect("live network");
+    assert!(live.is_native());
+    let scenario = Arc::new(crossroads_sim::Scenario::builtin("left").expect("scenario"));
+    let config = crossroads_sim::EnvConfig::for_actions(crossroads_sim::ActionSet::Ttg);
+    let mut envs = crossroads_actor::VecEnv::new(scenario, config, 6, 2, None).expect("envs");
+    for _ in 0..15 {
+        envs.step(&[0, 1, 2, 3, 4, 0]).expect("step");
+    }
+    let rows = envs.sparse_observations().to_vec();
+    let check = |live: &mut LiveNetwork, net: &QNetwork, what: &str| {
+        let expected = net.infer_sparse(&rows).expect("libtorch").q;
+        let mut q = vec![f32::NAN; expected.len()];
+        live.q_values_sparse(&rows, &mut q).expect("sparse");
+        for (x, y) in q.iter().zip(&expected) {
+            assert!(
+                (x - y).abs() <= 1e-5 * (1.0 + y.abs()),
+                "{what}: {q:?} vs {expected:?}"
+            );
+        }
+    };
+    let first = QNetwork::new(small_spec(), 1).expect("network");
+    check(&mut live, &first, "version 0");
+    let newer = QNetwork::new(small_spec(), 2).expect("network");
+    assert!(slot.offer(
+        Weights::from_safetensors(newer.to_safetensors(3).expect("bytes"), 30, 0).expect("weights")
+    ));
+    check(&mut live, &newer, "version 3");
+    assert_eq!(live.version(), 3);
+    assert!(live.is_native());
+    let conv = QNetwork::new(
+        NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 16]).expect("spec"),
+        4,
+    )
+    .expect("network");
+    assert!(slot.offer(
+        Weights::from_safetensors(conv.to_safetensors(4).expect("bytes"), 40, 0).expect("weights")
+    ));
+    check(&mut live, &conv, "version 4, conv");
+    assert!(!live.is_native(), "a conv network runs in libtorch");
 }

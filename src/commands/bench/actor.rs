@@ -49,6 +49,10 @@ struct Cell {
     env_steps_per_sec: f64,
     forward_passes_per_sec: f64,
     inference_fraction: f64,
+    /// Lanes the environments act in (2: pipelined).
+    lanes: usize,
+    /// The forward pass runs in plain Rust (`NativeMlp`), not libtorch.
+    native: bool,
     dropped: u64,
     rounds: Vec<f64>,
 }
@@ -97,6 +101,14 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     let spec = crossroads_model::network_spec(&config.sim, &config.learner)?;
     let network = describe_network(&spec);
     let load = load_average();
+    let forward = cells.first().map_or("", |c| {
+        if c.native {
+            "plain-Rust forward pass"
+        } else {
+            "libtorch forward pass"
+        }
+    });
+    let lanes = cells.iter().map(|c| c.lanes).max().unwrap_or(1);
     if o.json {
         println!(
             "{}",
@@ -117,11 +129,16 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
         );
     } else {
         println!(
-            "actor throughput on {} ({} actions), {network}, batches of {}, {}-step; rayon {} threads, libtorch {}; median of {} rounds of {:.1} s (load average {load})",
+            "actor throughput on {} ({} actions), {network} ({forward}), batches of {}, {}-step, {}; rayon {} threads, libtorch {}; median of {} rounds of {:.1} s (load average {load})",
             config.sim.scenario,
             config.sim.action_set,
             config.actor.batch_size,
             config.actor.n_step,
+            if lanes > 1 {
+                "two lanes (actor.pipeline)"
+            } else {
+                "one lane"
+            },
             rayon::current_num_threads(),
             tch::get_num_threads(),
             o.rounds,
@@ -172,6 +189,7 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         mut network,
         ..
     } = ActorParts::new(&c, 0, metrics.clone())?;
+    let (lanes, native) = (actor.lanes(), network.is_native());
     let sink = match transport {
         "inproc" => Sink::Table(Arc::clone(&table)),
         kind => {
@@ -256,6 +274,8 @@ async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> any
         env_steps_per_sec: median(&steps),
         forward_passes_per_sec: median(&passes),
         inference_fraction: median(&inference),
+        lanes,
+        native,
         dropped: metrics.dropped_total("buffer_full") - dropped0,
         rounds: rates,
     })
