@@ -24,6 +24,13 @@ pub struct RuntimeConfig {
     /// 1.3x more transitions/s; and one thread keeps its pace beside a
     /// busy process. At most 1024.
     pub torch_threads: usize,
+    /// libtorch intra-op threads of the learner's training thread; 0 (the
+    /// default) means `torch_threads`. The conv experiments set 2: a conv
+    /// update has products big enough to split (on 2 AMD EPYC cores, 44
+    /// against 30 updates/s in `bench learner`, and 1.3x the updates in
+    /// the first two minutes of `train` beside its actors), where an MLP's
+    /// does not (463 against 323 updates/s). At most 1024.
+    pub learner_torch_threads: usize,
     /// Number format of the networks an actor and the learner run:
     /// `auto` (the default) computes a conv trunk in bf16 (fp32 master
     /// weights) on a CPU with AMX-BF16 matrix units, where it measured
@@ -79,6 +86,7 @@ impl Default for RuntimeConfig {
             worker_threads: 2,
             compute_threads: 0,
             torch_threads: 1,
+            learner_torch_threads: 0,
             precision: PrecisionSetting::Auto,
         }
     }
@@ -91,6 +99,15 @@ impl RuntimeConfig {
         match (self.torch_threads, self.compute_threads) {
             (0, 0) => None,
             (0, n) | (n, _) => Some(n),
+        }
+    }
+
+    /// libtorch's intra-op threads for the learner's training thread, if
+    /// set: `learner_torch_threads`, else [`RuntimeConfig::torch_threads`].
+    pub fn learner_torch_threads(&self) -> Option<usize> {
+        match self.learner_torch_threads {
+            0 => self.torch_threads(),
+            n => Some(n),
         }
     }
 
@@ -112,6 +129,14 @@ impl RuntimeConfig {
             format!(
                 "must be at most 1024 (0 = as compute_threads), got {}",
                 self.torch_threads
+            ),
+        );
+        problems.check(
+            self.learner_torch_threads <= 1024,
+            "learner_torch_threads",
+            format!(
+                "must be at most 1024 (0 = as torch_threads), got {}",
+                self.learner_torch_threads
             ),
         );
         problems.into_vec()

@@ -242,7 +242,7 @@ async fn start_training(
     let (ready_tx, ready_rx) = oneshot::channel();
     let (done_tx, done_rx) = oneshot::channel();
     let thread_stop = stop.clone();
-    let threads = config.runtime.torch_threads();
+    let threads = config.runtime.learner_torch_threads();
     std::thread::Builder::new()
         .name("learner".to_owned())
         .spawn(move || {

@@ -511,13 +511,7 @@ fn the_native_mlp_gives_the_networks_q_values() {
         let values = sparse_rows(41, rows);
         let pairs: Vec<Vec<(u32, f32)>> = values
             .chunks_exact(41)
-            .map(|r| {
-                r.iter()
-                    .enumerate()
-                    .filter(|(_, v)| **v != 0.0)
-                    .map(|(i, v)| (i as u32, *v))
-                    .collect()
-            })
+            .map(crossroads_types::codec::nonzero_pairs)
             .collect();
         for round in 0..2 {
             let expected = net.infer(&values, rows).expect("libtorch").q;

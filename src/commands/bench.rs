@@ -43,7 +43,9 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Re
             config,
             &learner::Options {
                 batches: batch.clone(),
-                threads: threads.or(config.runtime.torch_threads()).unwrap_or(1),
+                threads: threads
+                    .or(config.runtime.learner_torch_threads())
+                    .unwrap_or(1),
                 rounds: *rounds,
                 seconds: *seconds,
                 fed_updates: *fed_updates,

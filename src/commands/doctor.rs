@@ -29,7 +29,11 @@ const CALLS: usize = 50;
 struct Report {
     version: &'static str,
     cores: usize,
+    /// libtorch threads of an actor's network (`runtime.torch_threads`).
     torch_threads: i32,
+    /// libtorch threads of the learner's updates
+    /// (`runtime.learner_torch_threads`).
+    learner_torch_threads: i32,
     cuda_available: bool,
     mkl: bool,
     openmp: bool,
@@ -125,9 +129,15 @@ fn default_experiment(global: &GlobalArgs) -> Option<crate::experiments::Experim
 /// Prints the report.
 pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::Result<ExitCode> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if let Some(n) = config.runtime.torch_threads() {
-        tch::set_num_threads(n as i32);
-    }
+    // Each role's libtorch threads, set on this thread before its timings.
+    let threads_of = |n: Option<usize>| {
+        if let Some(n) = n {
+            tch::set_num_threads(n as i32);
+        }
+        tch::get_num_threads()
+    };
+    let learner_threads = threads_of(config.runtime.learner_torch_threads());
+    let actor_threads = threads_of(config.runtime.torch_threads());
     let (sim, spec) = network(config)?;
     let learner = &config.learner;
     let experiment = default_experiment(global)
@@ -144,6 +154,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     let (training, acting) = (choose(Work::Training), choose(Work::Acting));
     let actor_batch = config.actor.envs;
     let learner_batch = learner.batch_size;
+    threads_of(config.runtime.learner_torch_threads());
     let update = updates_per_second(
         &sim,
         learner,
@@ -156,9 +167,11 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     // format its role computes in.
     let mut actor_native = false;
     let mut forwards = || -> anyhow::Result<(f64, f64)> {
+        threads_of(config.runtime.torch_threads());
         net.set_precision(acting);
         let (actor, native) = time_inference(&net, actor_batch)?;
         actor_native = native;
+        threads_of(config.runtime.learner_torch_threads());
         net.set_precision(training);
         Ok((actor, time_forward(&net, learner_batch as usize)?))
     };
@@ -177,7 +190,8 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     let report = Report {
         version: env!("CARGO_PKG_VERSION"),
         cores,
-        torch_threads: tch::get_num_threads(),
+        torch_threads: actor_threads,
+        learner_torch_threads: learner_threads,
         cuda_available: tch::Cuda::is_available(),
         mkl: tch::utils::has_mkl(),
         openmp: tch::utils::has_openmp(),
@@ -200,7 +214,10 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     } else {
         println!("crossroads {}", report.version);
         println!("  cores            {}", report.cores);
-        println!("  torch threads    {}", report.torch_threads);
+        println!(
+            "  torch threads    actors {}, learner {} (runtime.torch_threads, runtime.learner_torch_threads)",
+            report.torch_threads, report.learner_torch_threads
+        );
         println!("  CUDA available   {}", report.cuda_available);
         println!("  MKL / OpenMP     {} / {}", report.mkl, report.openmp);
         println!(
@@ -287,13 +304,7 @@ fn time_inference(net: &QNetwork, batch: usize) -> anyhow::Result<(f64, bool)> {
         // As the actors call it: each observation's non-zero values.
         let pairs: Vec<Vec<(u32, f32)>> = obs
             .chunks_exact(native.obs_len())
-            .map(|row| {
-                row.iter()
-                    .enumerate()
-                    .filter(|(_, v)| **v != 0.0)
-                    .map(|(i, v)| (i as u32, *v))
-                    .collect()
-            })
+            .map(crossroads_types::codec::nonzero_pairs)
             .collect();
         let mut q = vec![0.0; batch * native.num_actions()];
         let ms = median_ms(|| Ok(native.q_values_sparse(&pairs, &mut q)?))?;

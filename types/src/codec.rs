@@ -96,6 +96,14 @@ pub fn encode_dense(values: &[f32], out: &mut Vec<u8>) {
     }
 }
 
+/// The non-zero values of `values` as `(index, value)` pairs, in order
+/// (the inverse of [`spread_pairs`]).
+pub fn nonzero_pairs(values: &[f32]) -> Vec<(u32, f32)> {
+    let mut pairs = Vec::new();
+    for_each_nonzero(values, |i, v| pairs.push((i as u32, v)));
+    pairs
+}
+
 /// Calls `f(index, value)` for each value of `values` that is not zero
 /// (of either sign; NaN is not zero), in order. Skips zeros 16 at a time
 /// with a test that vectorizes: most of an observation is zeros.
@@ -271,6 +279,7 @@ mod tests {
             [0.0, 1.5, 0.0, 4.0, 0.0],
             "zeros elsewhere, the later pair wins"
         );
+        assert_eq!(nonzero_pairs(&row), [(1, 1.5), (3, 4.0)], "and back");
         let err = spread_pairs([(0, 1.0), (5, 2.0)], &mut row).expect_err("past the end");
         assert_eq!(err, CodecError::IndexRange { index: 5, len: 5 });
         assert!(err.to_string().contains("index 5"), "{err}");

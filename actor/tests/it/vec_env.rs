@@ -119,12 +119,7 @@ fn dense_rows_and_sparse_lists_are_the_simulators_observations() {
                 own.as_slice(),
                 "step {s} env {i}"
             );
-            let nonzero: Vec<(u32, f32)> = own
-                .iter()
-                .enumerate()
-                .filter(|(_, v)| **v != 0.0)
-                .map(|(k, v)| (k as u32, *v))
-                .collect();
+            let nonzero = crossroads_types::codec::nonzero_pairs(&own);
             assert_eq!(sparse[i], nonzero, "step {s} env {i}");
             let mut decoded = vec![0.0; len];
             crossroads_types::codec::decode_into(

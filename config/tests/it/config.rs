@@ -66,6 +66,25 @@ fn networks_run_on_one_libtorch_thread_unless_told_otherwise() {
 }
 
 #[test]
+fn the_learner_follows_torch_threads_unless_given_its_own() {
+    let (_f, result) = load("[runtime]\ntorch_threads = 3\n");
+    assert_eq!(
+        result.expect("valid").runtime.learner_torch_threads(),
+        Some(3)
+    );
+    let (_f, result) = load("[runtime]\nlearner_torch_threads = 2\n");
+    let runtime = result.expect("valid").runtime;
+    assert_eq!(
+        (runtime.torch_threads(), runtime.learner_torch_threads()),
+        (Some(1), Some(2)),
+        "actors keep one"
+    );
+    let (_f, result) = load("[runtime]\nlearner_torch_threads = 4000\n");
+    let err = format!("{:#}", result.expect_err("out of range"));
+    assert!(err.contains("runtime.learner_torch_threads"), "{err}");
+}
+
+#[test]
 fn precision_is_auto_unless_told_and_names_a_wrong_value() {
     let (_f, result) = load("");
     assert_eq!(
