@@ -33,7 +33,7 @@ use crate::worker::Worker;
 /// [`ActorMetrics`].
 ///
 /// An MLP network in f32 is computed by [`NativeMlp`] over a copy of its
-/// weights, made again for each version applied (a millisecond for the
+/// weights, made again for each version applied (0.67 M values for the
 /// default network): at the actor's batch sizes libtorch's per-operator
 /// overhead costs more than the arithmetic. Other networks (conv, bf16)
 /// run in libtorch.
