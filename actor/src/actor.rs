@@ -20,7 +20,7 @@ use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, Ob
 use crate::push::Pusher;
 use crate::stats::EpisodeStats;
 use crate::values::ActionValues;
-use crate::vec_env::{EnvStep, EpisodeEnd, VecEnv};
+use crate::vec_env::{EpisodeEnd, VecEnv};
 
 /// Everything an [`Actor`] needs, resolved from the config.
 #[derive(Debug, Clone)]
@@ -277,7 +277,6 @@ struct Lane {
     q: Vec<f32>,
     actions: Vec<usize>,
     episode_steps: Vec<u32>,
-    results: Vec<EnvStep>,
     emitted: Vec<NStepTransition>,
     /// `actions` are chosen and not yet applied.
     decided: bool,
@@ -559,7 +558,6 @@ impl Lane {
             q: vec![0.0; m * envs.num_actions()],
             actions: vec![0; m],
             episode_steps: vec![0; m],
-            results: Vec::with_capacity(m),
             emitted: Vec::new(),
             decided: false,
             next_obs_id: k,
@@ -618,9 +616,7 @@ impl Lane {
 
     /// Steps every environment with its chosen action (on the rayon pool).
     fn apply(&mut self) -> Result<(), ActorError> {
-        let results = self.envs.step(&self.actions)?;
-        self.results.clear();
-        self.results.extend_from_slice(results);
+        self.envs.step(&self.actions)?;
         self.decided = false;
         Ok(())
     }
@@ -629,9 +625,10 @@ impl Lane {
     /// records each environment's step in its n-step window.
     fn record(&mut self, done: &mut Recorded<'_>) {
         let a = self.envs.num_actions();
-        done.summary.decisions += self.results.len() as u64;
-        for i in 0..self.results.len() {
-            let r = self.results[i];
+        let m = self.envs.len();
+        done.summary.decisions += m as u64;
+        for i in 0..m {
+            let r = self.envs.last_step()[i];
             done.summary.sim_steps += u64::from(r.steps);
             if let Some(end) = r.episode {
                 done.metrics.episode(done.mode, &end);

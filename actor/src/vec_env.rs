@@ -231,6 +231,12 @@ impl VecEnv {
             .unwrap_or_default()
     }
 
+    /// What each environment did in the last [`VecEnv::step`] (defaults
+    /// before the first).
+    pub fn last_step(&self) -> &[EnvStep] {
+        &self.results
+    }
+
     /// Applies `actions[i]` to environment `i`, all in parallel; resets
     /// those whose episode ended. Returns what each did; the observations
     /// are the new ones (the first of a new episode where one ended).

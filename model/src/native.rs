@@ -17,13 +17,13 @@
 //! `LiveNetwork` does on each version it applies). f32 throughout; the
 //! values equal libtorch's up to the order of float additions.
 
+use crossroads_types::codec;
 use ndarray::linalg::general_mat_mul;
 use ndarray::{ArrayView2, ArrayViewMut2};
 use tch::Tensor;
 
 use crate::network::{FIRST_WEIGHT, QNetwork};
 use crate::precision::Precision;
-use crate::spec::TrunkKind;
 use crate::{ModelError, observations};
 
 /// A dense layer: `weight` in PyTorch's `[outputs, inputs]` layout.
@@ -119,10 +119,7 @@ impl NativeMlp {
     /// its libtorch forward pass.
     pub fn of(net: &QNetwork) -> Result<Option<Self>, ModelError> {
         let spec = net.spec();
-        if spec.trunk != TrunkKind::Mlp
-            || !observations::reads_sparse(spec)
-            || net.precision() != Precision::F32
-        {
+        if !observations::reads_sparse(spec) || net.precision() != Precision::F32 {
             return Ok(None);
         }
         let inputs = spec.input_len() as usize;
@@ -181,9 +178,8 @@ impl NativeMlp {
         rows: &[R],
         out: &mut [f32],
     ) -> Result<(), ModelError> {
-        let n = rows.len();
-        self.first_layer(n, |row| rows[row].as_ref().iter().copied())?;
-        self.rest_and_heads(n, out)
+        self.first_layer(rows)?;
+        self.rest_and_heads(rows.len(), out)
     }
 
     /// Q-values of `n` dense observations back to back in `obs`; the first
@@ -196,31 +192,20 @@ impl NativeMlp {
                 got: vec![n as i64, (obs.len() / n.max(1)) as i64],
             });
         }
-        self.first_layer(n, |row| {
-            obs[row * len..(row + 1) * len]
-                .iter()
-                .enumerate()
-                .filter(|(_, v)| **v != 0.0)
-                .map(|(i, v)| (i as u32, *v))
-        })?;
-        self.rest_and_heads(n, out)
+        let rows: Vec<Vec<(u32, f32)>> = obs.chunks_exact(len).map(codec::nonzero_pairs).collect();
+        self.q_values_sparse(&rows, out)
     }
 
-    /// `a` = relu(first layer) of the `n` rows whose non-zero values
-    /// `pairs(row)` gives.
-    fn first_layer<I: Iterator<Item = (u32, f32)>>(
-        &mut self,
-        n: usize,
-        pairs: impl Fn(usize) -> I,
-    ) -> Result<(), ModelError> {
+    /// `a` = relu(first layer) of `rows`, each row's non-zero values.
+    fn first_layer<R: AsRef<[(u32, f32)]>>(&mut self, rows: &[R]) -> Result<(), ModelError> {
         let width = self.first_bias.len();
         self.a.clear();
-        self.a.reserve(n * width);
-        for row in 0..n {
+        self.a.reserve(rows.len() * width);
+        for (row, pairs) in rows.iter().enumerate() {
             let start = self.a.len();
             self.a.extend_from_slice(&self.first_bias);
             let h = &mut self.a[start..];
-            for (index, value) in pairs(row) {
+            for &(index, value) in pairs.as_ref() {
                 let i = index as usize;
                 if i >= self.inputs {
                     return Err(ModelError::Index {

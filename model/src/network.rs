@@ -473,17 +473,15 @@ impl QNetwork {
             // Dense rows straight from the pairs; `infer` checks the values.
             let mut dense = vec![0.0; rows.len() * width];
             for (r, (row, pairs)) in dense.chunks_exact_mut(width).zip(rows).enumerate() {
-                codec::spread_pairs(pairs.as_ref().iter().copied(), row).map_err(|e| {
-                    let index = match e {
-                        codec::CodecError::IndexRange { index, .. } => index as usize,
-                        _ => width,
-                    };
-                    ModelError::Index {
+                if let Err(codec::CodecError::IndexRange { index, .. }) =
+                    codec::spread_pairs(pairs.as_ref().iter().copied(), row)
+                {
+                    return Err(ModelError::Index {
                         row: r,
-                        index,
+                        index: index as usize,
                         width,
-                    }
-                })?;
+                    });
+                }
             }
             return self.infer(&dense, rows.len());
         }

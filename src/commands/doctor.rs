@@ -136,8 +136,6 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         }
         tch::get_num_threads()
     };
-    let learner_threads = threads_of(config.runtime.learner_torch_threads());
-    let actor_threads = threads_of(config.runtime.torch_threads());
     let (sim, spec) = network(config)?;
     let learner = &config.learner;
     let experiment = default_experiment(global)
@@ -154,7 +152,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     let (training, acting) = (choose(Work::Training), choose(Work::Acting));
     let actor_batch = config.actor.envs;
     let learner_batch = learner.batch_size;
-    threads_of(config.runtime.learner_torch_threads());
+    let learner_threads = threads_of(config.runtime.learner_torch_threads());
     let update = updates_per_second(
         &sim,
         learner,
@@ -165,9 +163,9 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
     .context("timing learner updates")?;
     // The actors' call and the learner's forward pass, each in the
     // format its role computes in.
-    let mut actor_native = false;
+    let (mut actor_native, mut actor_threads) = (false, 1);
     let mut forwards = || -> anyhow::Result<(f64, f64)> {
-        threads_of(config.runtime.torch_threads());
+        actor_threads = threads_of(config.runtime.torch_threads());
         net.set_precision(acting);
         let (actor, native) = time_inference(&net, actor_batch)?;
         actor_native = native;
