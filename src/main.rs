@@ -7,7 +7,7 @@ use clap::Parser;
 use crossroads::cli::{Cli, every_set};
 
 fn main() -> ExitCode {
-    passive_openmp();
+    load_time_settings();
     let mut cli = Cli::parse();
     // clap keeps only the last group of a global flag given both before
     // and after the subcommand; every --set counts.
@@ -21,18 +21,41 @@ fn main() -> ExitCode {
     }
 }
 
-/// libtorch's OpenMP (libgomp) reads `OMP_WAIT_POLICY` once, as the binary
-/// loads, before `main`. Its default keeps idle threads spinning, and on a
-/// machine where another process is busy those spinning threads starve the
-/// ones with work: a forward pass 41x slower on this project's 2-core
-/// machine. So unless the user chose a policy, every command re-executes
-/// this binary once (same process id, arguments and environment) with
-/// `OMP_WAIT_POLICY=passive`, before any thread or file is opened. If that
-/// fails the command runs on, with a warning.
-fn passive_openmp() {
+/// Settings the C libraries under libtorch read once, as the binary loads,
+/// before `main`; each applies unless the user set the variable (an empty
+/// value counts as set).
+///
+/// - `OMP_WAIT_POLICY=passive`: libgomp's default keeps idle threads
+///   spinning, and on a machine where another process is busy those
+///   spinning threads starve the ones with work (a forward pass 41x slower
+///   on this project's 2-core machine).
+/// - [`MALLOC_TUNABLES`] in `GLIBC_TUNABLES`: glibc returns the top of its
+///   heap to the system whenever more than a few megabytes are free there,
+///   and a conv update frees that much every step, so the next one faulted
+///   its pages in again (900,000 page faults in a 9-second `bench learner`,
+///   41,000 with the tunables; 1.2x the conv updates/s at batch 64).
+const LOAD_TIME_SETTINGS: [(&str, &str); 2] = [
+    ("OMP_WAIT_POLICY", "passive"),
+    ("GLIBC_TUNABLES", MALLOC_TUNABLES),
+];
+
+/// Allocations of up to 16 MiB come from the heap (not a mapping of their
+/// own), and the heap is trimmed only when 32 MiB at its top are free. A
+/// fixed value also turns off glibc's own adjustment of both.
+const MALLOC_TUNABLES: &str =
+    "glibc.malloc.mmap_threshold=16777216:glibc.malloc.trim_threshold=33554432";
+
+/// Every command re-executes this binary once (same process id, arguments
+/// and environment) with the [`LOAD_TIME_SETTINGS`] the user left unset,
+/// before any thread or file is opened. If that fails the command runs on,
+/// with a warning.
+fn load_time_settings() {
     use std::os::unix::process::CommandExt;
-    const VAR: &str = "OMP_WAIT_POLICY";
-    if std::env::var_os(VAR).is_some() {
+    let missing: Vec<(&str, &str)> = LOAD_TIME_SETTINGS
+        .into_iter()
+        .filter(|(var, _)| std::env::var_os(var).is_none())
+        .collect();
+    if missing.is_empty() {
         return;
     }
     let mut args = std::env::args_os();
@@ -41,12 +64,15 @@ fn passive_openmp() {
         Ok(exe) => std::process::Command::new(exe)
             .arg0(argv0)
             .args(args)
-            .env(VAR, "passive")
+            .envs(missing.iter().copied())
             .exec(),
         Err(e) => e,
     };
+    let vars: Vec<String> = missing.iter().map(|(k, v)| format!("{k}={v}")).collect();
     eprintln!(
-        "warning: could not re-execute with {VAR}=passive ({error}); libtorch's idle threads \
-         will spin, which is slow on a busy machine: set {VAR}=passive yourself"
+        "warning: could not re-execute with {} ({error}); libtorch's idle threads may spin \
+         (slow on a busy machine) and its buffers fault their pages in every step: set them \
+         yourself",
+        vars.join(" ")
     );
 }

@@ -40,6 +40,9 @@ struct Report {
     /// `OMP_WAIT_POLICY` as this process runs (the binary makes it
     /// `passive` unless the user set it), or `unset`.
     openmp_wait_policy: String,
+    /// `GLIBC_TUNABLES` as this process runs (the binary sets glibc's
+    /// heap thresholds unless the user set it), or `unset`.
+    glibc_tunables: String,
     /// The network timed, in one line (`dueling conv 2344-16-32-256 -> 5`).
     network: String,
     /// The number format the learner's updates compute the trunk in
@@ -194,6 +197,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         mkl: tch::utils::has_mkl(),
         openmp: tch::utils::has_openmp(),
         openmp_wait_policy: std::env::var("OMP_WAIT_POLICY").unwrap_or_else(|_| "unset".into()),
+        glibc_tunables: std::env::var("GLIBC_TUNABLES").unwrap_or_else(|_| "unset".into()),
         network: super::bench::describe_network(&spec),
         learner_precision: training.name(),
         actor_precision: acting.name(),
@@ -221,6 +225,10 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         println!(
             "  OpenMP waits     {} (OMP_WAIT_POLICY)",
             report.openmp_wait_policy
+        );
+        println!(
+            "  glibc malloc     {} (GLIBC_TUNABLES)",
+            report.glibc_tunables
         );
         println!("  network          {} ({})", report.network, report.config);
         println!(

@@ -239,32 +239,63 @@ fn doctor_times_the_network_a_run_would_train() {
     assert_eq!(report["network"], "dueling mlp 2812-32 -> 5", "{report}");
 }
 
-/// `crossroads doctor --json` of a small network, with `OMP_WAIT_POLICY`
-/// as given (None: unset), and the report.
-fn doctor_with_wait_policy(policy: Option<&str>, extra: &[&str]) -> serde_json::Value {
+/// `crossroads doctor --json` of a small network, with each variable of
+/// `vars` set or (None) removed, and the report.
+fn doctor_with(vars: &[(&str, Option<&str>)], extra: &[&str]) -> serde_json::Value {
     let mut c = Command::new(env!("CARGO_BIN_EXE_crossroads"));
     c.args(["--set", "learner.trunk=mlp", "--set", "learner.hidden=[32]"])
         .args(["doctor", "--json"])
         .args(extra)
         .env_remove("CROSSROADS_CONFIG")
         .env_remove("CROSSROADS_EXPERIMENT");
-    match policy {
-        Some(p) => c.env("OMP_WAIT_POLICY", p),
-        None => c.env_remove("OMP_WAIT_POLICY"),
-    };
+    for (var, value) in vars {
+        match value {
+            Some(v) => c.env(var, v),
+            None => c.env_remove(var),
+        };
+    }
     let out = c.output().expect("run crossroads doctor");
     assert!(out.status.success(), "{}", stderr(&out));
     serde_json::from_str(&stdout(&out)).expect("JSON")
 }
 
-/// libgomp reads its wait policy before `main`; the binary re-executes
-/// itself with the passive one unless the user chose a policy.
+/// `doctor_with` `OMP_WAIT_POLICY` as given and `GLIBC_TUNABLES` unset.
+fn doctor_with_wait_policy(policy: Option<&str>, extra: &[&str]) -> serde_json::Value {
+    doctor_with(
+        &[("OMP_WAIT_POLICY", policy), ("GLIBC_TUNABLES", None)],
+        extra,
+    )
+}
+
+/// libgomp reads its wait policy and glibc its heap thresholds before
+/// `main`; the binary re-executes itself with the passive policy and the
+/// thresholds unless the user chose them.
 #[test]
 fn every_command_runs_with_passive_openmp_threads_unless_the_user_chose() {
     let report = doctor_with_wait_policy(None, &[]);
     assert_eq!(report["openmp_wait_policy"], "passive", "{report}");
+    let tunables = report["glibc_tunables"].as_str().expect("a string");
+    assert!(
+        tunables.contains("glibc.malloc.trim_threshold=")
+            && tunables.contains("glibc.malloc.mmap_threshold="),
+        "{report}"
+    );
     let report = doctor_with_wait_policy(Some("active"), &[]);
     assert_eq!(report["openmp_wait_policy"], "active", "{report}");
+    // The user's own tunables stay as they are, and the policy still
+    // becomes passive.
+    let report = doctor_with(
+        &[
+            ("OMP_WAIT_POLICY", None),
+            ("GLIBC_TUNABLES", Some("glibc.malloc.arena_max=2")),
+        ],
+        &[],
+    );
+    assert_eq!(
+        report["glibc_tunables"], "glibc.malloc.arena_max=2",
+        "{report}"
+    );
+    assert_eq!(report["openmp_wait_policy"], "passive", "{report}");
 }
 
 /// Beside a process spinning on one of the cores, a forward pass is not
