@@ -433,6 +433,22 @@ fn bench_time_to_target_trains_each_seed_and_reports_medians() {
             row["wall_seconds_to_target"], summary["reached"]["evaluation"]["wall_seconds"],
             "{report}"
         );
+        // The weights that confirmed it stay in `reached/`, with that
+        // evaluation, whatever `best/` holds later.
+        let reached = folder.join(format!("seed-{seed}/reached"));
+        let kept: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(reached.join("evaluation.json")).expect("reached/"),
+        )
+        .expect("reached/evaluation.json");
+        assert_eq!(kept, summary["reached"]["evaluation"], "{kept}");
+        assert!(
+            reached
+                .join("weights.safetensors")
+                .metadata()
+                .expect("reached weights")
+                .len()
+                > 0
+        );
         let config = std::fs::read_to_string(folder.join(format!("seed-{seed}/config.toml")))
             .expect("the run's config");
         assert!(config.contains(&format!("seed = {seed}")), "{config}");

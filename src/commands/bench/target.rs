@@ -232,7 +232,10 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
             _ => println!("no seed reached the target"),
         }
         if let Some(dir) = &o.out {
-            println!("runs in {}", dir.display());
+            println!(
+                "runs in {} (each seed-N/reached/ holds the network that confirmed the target)",
+                dir.display()
+            );
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -2,7 +2,9 @@
 //! newest checkpoint once it stopped) run greedily on the run's seeded
 //! trials in this process, appended to the curve, kept in `last/`,
 //! reported to the learner; a new best or a met target re-measured on
-//! `train.confirm_trials` and kept in `best/`.
+//! `train.confirm_trials` and kept in `best/`; the weights that first
+//! confirm the target are also kept in `reached/`, which a later best does
+//! not replace.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -186,7 +188,7 @@ impl Session {
     /// small, and a best picked on them alone would be picked on noise);
     /// keeps them in `best/` when the re-measured score is the best so far,
     /// and records the target as reached when it meets it for the first
-    /// time. Returns whether it did.
+    /// time (the weights in `reached/`). Returns whether it did.
     async fn consider_best(
         &mut self,
         safetensors: &[u8],
@@ -230,6 +232,7 @@ impl Session {
             );
         });
         if reached {
+            keep(&self.run.out.join("reached"), &confirmed, safetensors)?;
             self.metrics.reached();
             self.summary.reached = Some(Reached {
                 evaluation: confirmed,
