@@ -546,6 +546,18 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
         .env("CROSSROADS_BIN", env!("CARGO_BIN_EXE_crossroads")));
     let _image = RemoveImage(tag.clone());
 
+    // Every role in the image runs with libgomp's idle threads asleep and
+    // glibc keeping its heap (set by the image, or else by the binary's
+    // re-execution): what `doctor` sees inside a container.
+    let doctor = run(Command::new("docker").args(["run", "--rm", &tag, "doctor", "--json"]));
+    let report: serde_json::Value = serde_json::from_slice(&doctor.stdout).expect("doctor JSON");
+    assert_eq!(report["openmp_wait_policy"], "passive", "{report}");
+    assert_eq!(
+        report["glibc_tunables"],
+        "glibc.malloc.mmap_threshold=16777216:glibc.malloc.trim_threshold=33554432",
+        "{report}"
+    );
+
     // Small settings so a debug build trains within a minute on 2 cores.
     let dir = tempfile::tempdir().expect("temp dir");
     let overrides = dir.path().join("test.yaml");
