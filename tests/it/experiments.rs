@@ -59,3 +59,91 @@ fn every_experiment_config_is_valid_and_consistent() {
     }
     assert_eq!(seen, 13, "5 TTG + 5 Sequential + 3 occlusion experiments");
 }
+
+/// A target's time bound is TTC's, and TTC's time is a measurement: it has
+/// one home, the committed report, and the experiment files must follow it
+/// when the report is made again (after a change of the simulator, say).
+#[test]
+fn every_target_follows_the_baselines_of_the_committed_report() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let report = root.join("reports/paper/results.json");
+    let results: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&report).expect("reports/paper/results.json"),
+    )
+    .expect("results.json");
+    let number = |v: &serde_json::Value, what: &str| {
+        v.as_f64()
+            .unwrap_or_else(|| panic!("{}: no number at {what}", report.display()))
+    };
+    let mut checked = 0;
+    for e in crossroads::experiments::EXPERIMENTS {
+        let c = ConfigLoader::new()
+            .without_env()
+            .base(e.name, e.toml)
+            .load()
+            .unwrap_or_else(|err| panic!("{}: {err}", e.name));
+        if c.train.target_success <= 0.0 {
+            continue;
+        }
+        let row = results["table1"]
+            .as_array()
+            .expect("table1")
+            .iter()
+            .find(|r| r["scenario"] == c.sim.scenario.as_str());
+        if let Some(row) = row {
+            let ttc = number(&row["ttc"]["time"], "table1 ttc time");
+            assert!(
+                (c.train.target_time_s - ttc).abs() < 0.005,
+                "{}: train.target_time_s = {} but TTC's mean time on {} is {ttc:.2} s in {}; \
+                 write {ttc:.2}",
+                e.name,
+                c.train.target_time_s,
+                c.sim.scenario,
+                report.display()
+            );
+        } else {
+            assert_eq!(c.sim.scenario, "occluded", "{}: no baseline", e.name);
+            let cells: Vec<&serde_json::Value> = results["table2"]
+                .as_array()
+                .expect("table2")
+                .iter()
+                .map(|r| &r["ttc_creep"])
+                .collect();
+            let best = cells
+                .iter()
+                .map(|c| number(&c["success"], "table2 success"))
+                .fold(f64::MIN, f64::max);
+            let fastest = cells
+                .iter()
+                .map(|c| number(&c["time"], "table2 time"))
+                .fold(f64::MAX, f64::min);
+            assert!(
+                c.train.target_success * 100.0 > best && c.train.target_time_s < fastest,
+                "{}: the target ({} success, {} s) must beat TTC with creep in {} \
+                 ({best:.2} % at best, {fastest:.2} s at fastest)",
+                e.name,
+                c.train.target_success,
+                c.train.target_time_s,
+                report.display()
+            );
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 11, "10 Table I experiments and creep-occluded");
+}
+
+#[test]
+fn a_run_folder_is_named_after_its_experiment() {
+    use crossroads::commands::train::default_out;
+    for e in crossroads::experiments::EXPERIMENTS {
+        let (actions, scenario) = e.name.split_once('-').expect("<actions>-<scenario>");
+        assert_eq!(
+            default_out(scenario, actions),
+            std::path::Path::new("runs").join(e.name)
+        );
+    }
+    assert_eq!(
+        default_out("my/own.toml", "creep"),
+        std::path::Path::new("runs/creep-own")
+    );
+}

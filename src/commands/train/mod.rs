@@ -45,12 +45,13 @@ use super::role;
 use crate::cli::{GlobalArgs, TrainArgs};
 
 /// The run folder a run of `scenario` with `actions` gets by default:
-/// `runs/<scenario>-<actions>` (a scenario file contributes its stem).
+/// `runs/<actions>-<scenario>`, the built-in experiment's name (a scenario
+/// file contributes its stem).
 pub fn default_out(scenario: &str, actions: &str) -> PathBuf {
     let stem = Path::new(scenario)
         .file_stem()
         .map_or_else(|| scenario.to_owned(), |s| s.to_string_lossy().into_owned());
-    PathBuf::from("runs").join(format!("{stem}-{actions}"))
+    PathBuf::from("runs").join(format!("{actions}-{stem}"))
 }
 
 impl TrainArgs {
