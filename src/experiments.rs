@@ -1,6 +1,13 @@
 //! The paper's experiments as built-in configurations: the files of
 //! `configs/experiments/`, compiled into the binary so `crossroads train`
 //! and `crossroads reproduce` work from any folder.
+//!
+//! An experiment is a configuration layer under the file, the environment
+//! and `--set` (`ConfigLoader::base`): any command takes one with
+//! `--experiment NAME` (or `CROSSROADS_EXPERIMENT`), `crossroads train`
+//! without a file starts from the one for its scenario and action set, and
+//! `crossroads reproduce` trains them. `tests/it/experiments.rs` checks the
+//! files.
 
 /// One experiment: `<actions>-<scenario>` and its TOML text.
 #[derive(Debug, Clone, Copy)]

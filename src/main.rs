@@ -27,13 +27,14 @@ fn main() -> ExitCode {
 ///
 /// - `OMP_WAIT_POLICY=passive`: libgomp's default keeps idle threads
 ///   spinning, and on a machine where another process is busy those
-///   spinning threads starve the ones with work (a forward pass 41x slower
-///   on this project's 2-core machine).
+///   spinning threads starve the ones with work.
 /// - [`MALLOC_TUNABLES`] in `GLIBC_TUNABLES`: glibc returns the top of its
 ///   heap to the system whenever more than a few megabytes are free there,
-///   and a conv update frees that much every step, so the next one faulted
-///   its pages in again (900,000 page faults in a 9-second `bench learner`,
-///   41,000 with the tunables; 1.2x the conv updates/s at batch 64).
+///   and a conv update frees that much every step, so the next one faults
+///   its pages in again.
+///
+/// Figures for both: reports/performance/README.md ("OpenMP wait policy",
+/// "glibc heap thresholds").
 const LOAD_TIME_SETTINGS: [(&str, &str); 2] = [
     ("OMP_WAIT_POLICY", "passive"),
     ("GLIBC_TUNABLES", MALLOC_TUNABLES),

@@ -1,6 +1,10 @@
 //! A trained Q-network as a simulator [`Policy`]: greedy actions from one
 //! batched forward pass per call, so `crossroads eval`, `render` and the
 //! training run's evaluations drive it like the TTC baseline.
+//!
+//! It loads a checkpoint folder or a `.safetensors` file, or several joined
+//! by commas as an ensemble that acts on the mean of their Q-values.
+//! libtorch tensors are not `Sync`, so each rayon thread has its own copy.
 
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};

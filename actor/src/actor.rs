@@ -1,5 +1,12 @@
 //! The acting loop's core: one vectorized step at a time, from Q-values to
 //! actions, environment steps, n-step transitions and batches.
+//!
+//! With `actor.pipeline` (at least 2 environments) the environments are two
+//! lanes, and the calling thread computes one lane's Q-values and actions
+//! while the rayon pool steps the other's simulators, so the forward pass
+//! and the simulators overlap. Each environment keeps its seeds and random
+//! streams either way. [`resolve_index`] takes `actor.index`, or asks the
+//! replay server for one by host name (`JoinActor`), modulo `actor.count`.
 
 use std::collections::VecDeque;
 use std::ops::Range;

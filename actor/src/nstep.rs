@@ -18,6 +18,12 @@
 //! `R + discount * Q_target(s', argmax Q(s'))` expects. Episodes that end by
 //! the step limit are terminal too (the step limit is part of the task, and
 //! the observation carries the steps taken).
+//!
+//! An episode end flushes the whole window. [`NStepAssembler::cut`] emits
+//! the window bootstrapped from the current observation; the actor calls it
+//! before an exploratory action, so no return sums over one.
+//! [`BatchBuilder`] packs transitions into a batch, each observation once
+//! in its pool.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;

@@ -1,4 +1,10 @@
 //! The one thing the actor needs from a Q-network: batched action values.
+//!
+//! [`ActionValues`] is called once per vectorized step, with dense rows or,
+//! where [`ActionValues::reads_sparse`] says so, each observation's
+//! non-zero pairs. `&mut self`, so an implementation can swap weights
+//! between calls: the model's `QNetwork` and the actor's `LiveNetwork`
+//! implement it, and tests use a linear function.
 
 use crossroads_model::QNetwork;
 use crossroads_types::codec;

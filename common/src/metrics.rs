@@ -4,6 +4,11 @@
 //! Metric names are a public API: `crossroads_<component>_<thing>_<unit>`,
 //! `_total` for counters and `_seconds` for durations. Every registry starts
 //! with `crossroads_build_info` and `crossroads_start_time_seconds`.
+//!
+//! The same endpoint answers `/healthz` (liveness, for `crossroads health`
+//! and container health checks). [`get`] and [`scrape`] read another
+//! process's endpoints, for `crossroads train`, `crossroads health` and the
+//! deployment tests.
 
 use std::convert::Infallible;
 use std::net::SocketAddr;

@@ -1,5 +1,10 @@
 //! The shutdown signal: servers and loops take a [`Shutdown`] as an input
 //! and stop when it fires, whether from SIGINT, SIGTERM or a test.
+//!
+//! [`Shutdown::on_signals`] fires it on SIGINT or SIGTERM; a second signal
+//! exits at once, unless it comes within [`SAME_REQUEST`] of the first (a
+//! group kill or `timeout` delivers SIGTERM twice). [`Shutdown::child`]
+//! stops one component alone.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

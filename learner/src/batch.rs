@@ -1,5 +1,11 @@
 //! [`TrainingBatch`]: a sampled batch as the tensors an update needs,
 //! checked against the network at the boundary.
+//!
+//! Checked here: the observation kind, its length and the action count
+//! against the network's spec, and the importance weights. An MLP's batches
+//! go from the replay's sparse entries straight into sparse rows
+//! (`crossroads_model::Observations::from_encoded`), with no dense rows in
+//! between.
 
 use crossroads_model::{NetworkSpec, Observations};
 use crossroads_types::{Sample, TransitionBatch};

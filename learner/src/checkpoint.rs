@@ -17,6 +17,12 @@
 //! absent; leftovers of an interrupted write are removed on open. After each
 //! write the newest `keep` checkpoints are kept, plus the best by the
 //! evaluation metric.
+//!
+//! An id must be a plain folder name, and a symlink is never followed. The
+//! directory also holds the version lease ([`VERSION_LEASE_FILE`], written
+//! atomically): the learner leases weights versions a block at a time
+//! before publishing them and starts above the lease, so after a kill -9
+//! versions still only increase.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::{self, File};

@@ -2,6 +2,13 @@
 //! background task: [`spawn_prefetch`] keeps sampled batches decoded and
 //! ready while the previous update runs, [`spawn_priority_sender`] sends
 //! priority updates without making the training loop wait.
+//!
+//! Both are gRPC (the learner has no iceoryx2 path to the replay). Each
+//! sample request carries the importance exponent beta of [`BetaSchedule`],
+//! read from the training thread's update count; what a retry can fix
+//! (server down, rate limited) is retried with backoff, what it cannot ends
+//! the prefetcher with an error. A priority update that finds the sender's
+//! queue full is counted as dropped, not waited for.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};

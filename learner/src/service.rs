@@ -3,6 +3,10 @@
 //! reports. Converts and validates at the boundary; the token that
 //! state-changing calls need is checked before them, by the server's
 //! `crossroads_transport::security::TokenLayer`.
+//!
+//! The weights stream sends a subscriber the newest version, skipping any
+//! it fell behind on. Checkpoint files stream in chunks of 256 KiB;
+//! an invalid id answers INVALID_ARGUMENT, an unknown one NOT_FOUND.
 
 use std::collections::BTreeMap;
 use std::io::Read;

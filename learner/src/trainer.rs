@@ -1,5 +1,14 @@
 //! [`Trainer`]: the online and target networks and the optimizer, and
 //! [`Trainer::update`], one dueling double-DQN update on a batch.
+//!
+//! An update: targets under `no_grad` ([`crate::targets`]), the
+//! importance-weighted Huber loss (`learner.huber_delta`), gradients as
+//! fresh tensors ([`Optimizer::gradients`]: nothing to zero or accumulate),
+//! an optimizer step after global-norm clipping, the new priorities
+//! (`|TD error| + priority_eps`), and the target network's update: a hard
+//! copy every `target_period` updates, or a Polyak step. Both networks
+//! compute in the [`Precision`] the run chooses for training; their
+//! variables stay f32.
 
 use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate};
 use crossroads_model::{NetworkSpec, Precision, QNetwork, network_spec};

@@ -5,12 +5,12 @@
 //! actor's forward pass of the default network (2344-256-256 -> 5, 16 to
 //! 32 observations) is some twenty operator calls, each checking,
 //! allocating and dispatching, around one 256 x 256 product that takes a
-//! fraction of the time (`perf` of `bench actor`: MKL's kernels were a
-//! third of the acting thread's inference). Here the first layer is the
-//! sum of the weight rows of each observation's non-zero values (what the
-//! network's embedding bag computes), the other layers and the heads one
-//! `sgemm` each (`matrixmultiply` through `ndarray`, which picks AVX2/FMA at
-//! run time), in buffers reused from call to call.
+//! fraction of the time (profiles: reports/performance/README.md, "Speed
+//! work, before and after"). Here the first layer is the sum of the weight
+//! rows of each observation's non-zero values (what the network's embedding
+//! bag computes), the other layers and the heads one `sgemm` each
+//! (`matrixmultiply` through `ndarray`, which picks AVX2/FMA at run time),
+//! in buffers reused from call to call.
 //!
 //! A copy: [`NativeMlp::of`] reads the network's variables once, and the
 //! owner makes a new copy when the weights change (the actor's

@@ -1,6 +1,20 @@
 //! [`QNetwork`]: the dueling Q-network over an MLP or conv trunk, owning its
 //! variables, with the batched inference actors use and the copies the
 //! learner's target network needs.
+//!
+//! Every network is built on the CPU. The trunk is an MLP, or 3x3
+//! convolutions (stride 1, then 2) and one fully connected layer, with the
+//! ego features joined after the convolutions. [`QNetwork::infer`] (dense
+//! rows) and [`QNetwork::infer_sparse`] (each row's non-zero pairs) are the
+//! actors' no-grad calls and refuse malformed or non-finite input;
+//! [`QNetwork::copy_from`] and [`QNetwork::soft_update_from`] serve the
+//! target network.
+//!
+//! Invariant: outside the network a variable has PyTorch's layout
+//! ([`QNetwork::named_variables`], weights files, optimizer state in
+//! checkpoints); an MLP's first weight is stored transposed
+//! ([`QNetwork::parameters`], what the optimizer updates), and
+//! [`QNetwork::file_layout`] turns a tensor between the two.
 
 use crossroads_types::codec;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
@@ -17,10 +31,10 @@ pub(crate) const FIRST_WEIGHT: &str = "trunk.0.weight";
 /// The first layer of an MLP trunk. Its weight is stored transposed,
 /// `[inputs, hidden]`, so that over sparse observations the layer is the
 /// sum of the (contiguous) rows of the non-zero inputs times their values:
-/// an embedding bag, 5-6x faster than the dense product on a TTG
-/// observation. Outside the network (safetensors, optimizer state) the
-/// weight has PyTorch's `[hidden, inputs]` layout; see
-/// [`QNetwork::file_layout`].
+/// an embedding bag, which skips the zeros that make up nearly all of a
+/// TTG observation (figures: reports/performance/README.md). Outside the
+/// network (safetensors, optimizer state) the weight has PyTorch's
+/// `[hidden, inputs]` layout; see [`QNetwork::file_layout`].
 struct FirstLayer {
     weight_t: Tensor,
     bias: Tensor,

@@ -4,6 +4,11 @@
 //! weight rows of the non-zero inputs, each times its value (an embedding
 //! bag with per-sample weights), which skips the zeros the dense product
 //! multiplies.
+//!
+//! [`Observations::new`] (dense values) and [`Observations::from_encoded`]
+//! (the replay's encoded entries, checked) pick the form: sparse rows for
+//! an MLP trunk with hidden layers, dense otherwise (a conv trunk's first
+//! layer is a convolution).
 
 use crossroads_types::codec::{self, CodecError, ObservationEncoding};
 use tch::{Kind, Tensor};

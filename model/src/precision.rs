@@ -1,5 +1,9 @@
 //! [`Precision`]: the number format a network computes its trunk in, and
 //! the run-time choice behind `runtime.precision = "auto"`.
+//!
+//! Variables, weights files and optimizer state are f32 in either format.
+//! `auto` picks bf16 only for training a conv trunk on a CPU with AMX-BF16
+//! ([`Precision::choose`]).
 
 use crossroads_config::PrecisionSetting;
 
@@ -34,13 +38,11 @@ pub enum Work {
 impl Precision {
     /// The format `setting` asks for a network of `spec` doing `work` on
     /// this CPU. `auto` is bf16 for training a conv trunk on a CPU with
-    /// AMX-BF16 (measured on 2 cores of a Xeon: 1.2-1.8x the fp32 updates
-    /// per second at batch 64, 1.23x the learner's pace inside `train`)
-    /// and fp32 for everything else: an actor's conv forward pass at its
-    /// batch of 16 gained nothing (the casts of the weights cost what the
-    /// matrix units save), an MLP actor in bf16 stored 0.6-0.9x the
-    /// transitions/s, and without matrix units bf16 is not measured to
-    /// pay.
+    /// AMX-BF16, the one case measured faster, and fp32 for everything
+    /// else: at an actor's small batches the casts of the weights cost
+    /// what the matrix units save, an MLP has little dense work, and
+    /// without matrix units bf16 is not measured to pay (figures:
+    /// reports/performance/README.md, "bf16").
     pub fn choose(setting: PrecisionSetting, spec: &NetworkSpec, work: Work) -> Self {
         match setting {
             PrecisionSetting::F32 => Self::F32,

@@ -12,6 +12,11 @@
 //!
 //! [`encode`] and [`decode`] are the generic halves, also used for other
 //! named tensors (the learner's optimizer state).
+//!
+//! A network's tensors are named as its variables (`trunk.<i>.*`,
+//! `trunk.fc.*` after convolutions, `value.*`, `advantage.*`), in PyTorch's
+//! layout. [`assign`] checks every name, shape and value (finite) before
+//! it changes anything.
 
 use std::collections::{BTreeSet, HashMap};
 

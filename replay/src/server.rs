@@ -8,6 +8,10 @@
 //! current batch, the ingest thread empties its queues, then the last
 //! snapshot is written, so every acknowledged transition is in it.
 //! [`run`] is both in one call.
+//!
+//! A server serves one table today, named by `replay.table`; the service
+//! and snapshots already handle several. Actors insert over gRPC or
+//! iceoryx2; the learner samples and updates priorities over gRPC only.
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;

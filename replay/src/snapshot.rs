@@ -14,6 +14,13 @@
 //! compact observations. A truncated file fails the length check, a
 //! flipped bit a checksum; either is reported with the file's path and the
 //! file is renamed `*.corrupt` at restore, never deleted or overwritten.
+//!
+//! At start the newest valid snapshot is restored. Snapshots that exist but
+//! are all corrupt are an error (starting empty would prune them), as is a
+//! snapshot holding a table the server does not serve (`server`). A
+//! restored image must hold only what valid batches could have put there,
+//! or `Table::restore` refuses it: samples are not checked again. Each
+//! snapshot first seals the write-ahead log's segment ([`crate::wal`]).
 
 use std::fs::{self, File};
 use std::io::{Read, Write};

@@ -1,5 +1,9 @@
 //! Evaluation of a policy over many seeded trials, in parallel, with the
 //! same result whatever the number of threads.
+//!
+//! Each trial's seed derives from the base seed and its index (the `seed`
+//! module), trials run on the rayon pool, and the summary's intervals are
+//! 95 %: Wilson score intervals for rates, normal intervals for means.
 
 use std::sync::Arc;
 

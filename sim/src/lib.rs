@@ -64,9 +64,8 @@
 //! channels. Occupancy, so that a stopped car is never all zeros. The
 //! offsets (the paper gives them to its occlusion networks only) because a
 //! TTG cell is 8 m long, 0.4 s at the speed limit: without them gaps within
-//! that much of each other look the same, and a network trained on the
-//! plain grid collided 0.3-0.8 % of the time on Left where with the offsets
-//! (and a conv trunk) it reaches 0.05 % (reports/paper/NOTES.md).
+//! that much of each other look the same (what they changed in training:
+//! reports/paper/NOTES.md).
 //!
 //! **Occluded channel**, when the scenario has occluders
 //! ([`ObsSpec::occlusion`]): 1 when the straight line from the sensor to
@@ -118,15 +117,14 @@
 //!   that has merged a car length into a lane is followed there like any
 //!   leader rather than driven through.
 //! - Car following is the improved IDM ([`iidm_accel`]) with a 0.8 s
-//!   headway: plain IDM let a follower faster than its leader hang back at
-//!   up to 1.7 times its desired gap, which spread platoons to 2 to 3 s
-//!   headways, a stream more regular than the random one emitted, with
-//!   fewer long gaps for TTC. On a free road cars accelerate as Krauss's
-//!   do, at the full 2.6 m/s² up to their desired speed
-//!   ([`krauss_free_accel`]): IDM's free-road term fades near the desired
-//!   speed, and against Krauss dawdling it left cars cruising at 93 % of
-//!   it, streams 1 m/s slower than SUMO's with fewer openings for TTC
-//!   (TTC with creep 9 points below SUMO's).
+//!   headway: plain IDM let a follower faster than its leader hang back
+//!   well beyond its desired gap, which spread platoons into a stream more
+//!   regular than the random one emitted, with fewer long gaps for TTC. On
+//!   a free road cars accelerate as Krauss's do, at the full 2.6 m/s² up to
+//!   their desired speed ([`krauss_free_accel`]): IDM's free-road term
+//!   fades near the desired speed, and against Krauss dawdling it leaves
+//!   cars cruising at `(1 - sigma/2)^(1/4) = 0.93` of it, in streams slower
+//!   than SUMO's with fewer openings for TTC (reports/sumo/NOTES.md).
 //! - The ego accelerates at 2.6 m/s² (SUMO's default car) and takes each
 //!   turn at the speed netconvert gives a junction lane of that shape
 //!   ([`EgoParams::lateral_accel`]: `sqrt(5.5 (L / (angle - 15 deg) +
@@ -134,8 +132,8 @@
 //!   while its front is on the arc, as SUMO limits a vehicle by its
 //!   front's lane. It waits 1 m before the road edge (2 m in the occlusion
 //!   family, so that the walls hide the near lane). Empty-road drives from
-//!   the stop line: Right 3.6 s, Left 4.4, Left2 4.8, Forward 4.2,
-//!   Challenge 4.6, SUMO's to within 0.1 s.
+//!   the stop line are checked against SUMO's (`crossroads sumo-check
+//!   --strict` fails beyond 0.3 s).
 //! - The goal lies as far past the intersection as the paper's times
 //!   allow (its fastest mean times, 4.63, 5.24, 5.40, 4.40 and 7.94 s,
 //!   include some waiting).
@@ -153,29 +151,11 @@
 //!   where a 30 m wall hid nothing within 99 m of the stopped ego and TTC
 //!   without creeping never collided (see `configs/scenarios/occluded.toml`).
 //!
-//! Result (`crossroads tune-ttc --trials 10000`, seed 0, TTG actions; the
-//! lowest threshold of 0.25 s steps without a collision; time of
-//! successes; SUMO's with its own default junction geometry, 2,000 to
-//! 3,000 trials, in brackets):
-//!
-//! | scenario | threshold s | success % | time s |
-//! | --- | --- | --- | --- |
-//! | Right | 1.25 (1.25) | 100 (100) | 4.21 (4.32) |
-//! | Left | 1.5 (1.5) | 99.57 (99.2) | 6.28 (6.38) |
-//! | Left2 | 1.5 (1.5) | 99.98 (100) | 5.93 (5.93) |
-//! | Forward | 1.5 (1.5) | 99.90 (99.9) | 5.58 (5.65) |
-//! | Challenge | 1.5 (1.5) | 64.46 (61.7) | 10.55 |
-//!
-//! The paper's TTC column (99.61 / 99.7 / 99.42 / 99.91 / 39.2 % at 6.46 /
-//! 6.97 / 7.59 / 6.19 / 12.55 s) is slower than SUMO's own at its
-//! collision-free thresholds; SUMO reaches the paper's times only at 2 to
-//! 3 s thresholds. TTC with creep on the occlusion family
-//! (`crossroads sumo-check`, 500 trials) is collision-free from 3.25 s at
-//! 30 m (61.0 % success; SUMO 3.25 s, 63.8 %) and from 3 s at 60 and 90 m
-//! (67.8 %; SUMO 3 s, 68.2 %), below the paper's 83-88 % in both.
+//! Result figures (tuned TTC thresholds against SUMO's, empty-road
+//! drives, every cell of both simulators) are in `reports/sumo/README.md`,
+//! the paper's TTC columns beside ours in `reports/paper/README.md`;
 //! `reports/sumo/NOTES.md` has the readings of what the paper leaves open
-//! and the mechanism behind each remaining difference (traffic braking,
-//! crossing collisions below the tuned thresholds, the wait on Right).
+//! and the mechanism behind each remaining difference.
 //!
 //! # Determinism
 //!

@@ -34,9 +34,9 @@ pub struct TrafficParams {
     pub idm_delta: f64,
     /// Free-road acceleration by Krauss's rule ([`crate::krauss_free_accel`]:
     /// the full `accel` up to the desired speed, as SUMO's cars) rather than
-    /// IDM's (`accel (1 - (v/v0)^delta)`), which under dawdling left cars
-    /// cruising at 93 % of their desired speed and streams 1 m/s slower
-    /// than SUMO's.
+    /// IDM's (`accel (1 - (v/v0)^delta)`), which under dawdling leaves cars
+    /// cruising below their desired speed, in streams slower than SUMO's
+    /// (reports/sumo/NOTES.md).
     pub krauss_free_road: bool,
     /// Mean of the speed factor (desired speed = lane limit x factor).
     pub speed_factor_mean: f64,

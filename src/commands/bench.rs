@@ -1,4 +1,8 @@
 //! `crossroads bench`: throughput and memory measured on this machine.
+//!
+//! `bench sim` and `bench replay` are here; `bench learner` (with the
+//! PyTorch twin `scripts/bench_learner_torch.py`), `bench actor`, `bench
+//! load` and `bench time-to-target` have a module each under `bench/`.
 
 use std::process::ExitCode;
 use std::time::Duration;

@@ -5,6 +5,9 @@
 //! the actor's batch (`actor.envs`) and the learner's (`learner.batch_size`).
 //! Without `--config` or `--experiment` that is the built-in experiment
 //! `crossroads train` trains by default.
+//!
+//! With `--busy` it times the forward passes again beside another process
+//! spinning on a core (a shell loop), as on a loaded machine.
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};

@@ -299,10 +299,10 @@ fn every_command_runs_with_passive_openmp_threads_unless_the_user_chose() {
 }
 
 /// Beside a process spinning on one of the cores, a forward pass is not
-/// much slower than quiet. With libgomp's spinning threads it was 41x
-/// slower on this project's 2-core Intel machine (4.5x on the AMD one);
-/// losing a core's share costs at most 2x; the bound leaves room for the
-/// noise of tests running side by side, not for the collapse.
+/// much slower than quiet. With libgomp's spinning threads it collapsed
+/// (reports/performance/README.md, "OpenMP wait policy"); losing a core's
+/// share costs at most 2x; the bound leaves room for the noise of tests
+/// running side by side, not for the collapse.
 #[test]
 fn a_busy_core_does_not_collapse_the_forward_pass() {
     let report = doctor_with_wait_policy(None, &["--busy"]);

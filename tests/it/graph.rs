@@ -1,4 +1,4 @@
-//! The invariants the crate graph states (ARCHITECTURE.md, "Invariants"),
+//! The invariants the crate graph states (ARCHITECTURE.md, "Code map"),
 //! checked on the graph itself: `cargo tree` of each crate's normal
 //! (non-dev) dependencies, so a new dependency that breaks one fails here.
 

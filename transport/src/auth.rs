@@ -8,6 +8,9 @@
 //! ([`REPLAY_OPEN_CALLS`], [`LEARNER_OPEN_CALLS`]): every other path needs
 //! the token, so a call added to a service later is guarded until someone
 //! decides otherwise.
+//!
+//! A refused call is answered UNAUTHENTICATED, naming what is missing; the
+//! token is compared in constant time, and a [`Token`]'s `Debug` hides it.
 
 use std::fmt;
 use std::path::Path;

@@ -2,6 +2,10 @@
 //! and the learner's clients a lazily connecting channel to a URL, with
 //! TLS for `https://` endpoints and the token on every call, as a
 //! [`ClientSecurity`] says.
+//!
+//! Channels keep HTTP/2 connections alive with pings. An `https://`
+//! endpoint without a CA (`transport.tls.ca_file`) is refused, and so is
+//! an `http://` one when a CA is set.
 
 use std::time::Duration;
 

@@ -3,6 +3,11 @@
 //! header (transition batches in [`shm`](crate::shm), weights in
 //! [`weights_shm`](crate::weights_shm)), so each side opens a service with
 //! the same settings, as iceoryx2 requires, and names it the same way.
+//!
+//! iceoryx2 keeps its segments in `/dev/shm` and its service bookkeeping
+//! under `/tmp/iceoryx2`: processes that share a service (containers too)
+//! must share both, the IPC namespace and a user id, and agree on
+//! `transport.shm_prefix`, which starts every service name.
 
 use std::fmt::Debug;
 

@@ -18,6 +18,10 @@
 //! Batches still queued when their publisher goes away are dropped by
 //! iceoryx2, so a publisher [`flush`](ShmBatchPublisher::flush)es before it
 //! ends.
+//!
+//! A successful send means the batch is in the server's queue; its
+//! [`ShmInsertAck`] means it is stored, as a gRPC acknowledgement does. So
+//! a publisher that crashes loses what it had not seen acknowledged.
 
 use std::fmt;
 use std::time::Duration;

@@ -2,6 +2,11 @@
 //! of the gradient, the parameter and its state slots are read once and
 //! written once, where the same rule as tensor operations makes about a
 //! dozen passes and as many temporaries.
+//!
+//! `with_slices` holds the workspace's one `#[allow(unsafe_code)]`
+//! outside build scripts: it makes slices only of dense, contiguous f32 CPU
+//! tensors of one size whose memory does not overlap, and refuses anything
+//! else (so training needs its tensors on the CPU).
 
 use tch::{Device, Kind, Tensor};
 

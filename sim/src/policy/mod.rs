@@ -1,5 +1,10 @@
 //! Policies that drive environments: the [`Policy`] trait, the baselines
 //! (TTC, TTC with creep, random) and parsing of policy strings.
+//!
+//! A [`Policy`] decides for a batch of environments in one call, so a
+//! network acts on all of them with one forward pass. Besides the
+//! baselines: [`NeverPolicy`] (waits until the time limit) and
+//! [`ShieldedPolicy`] (any policy behind the safety shield).
 
 mod never;
 mod random;

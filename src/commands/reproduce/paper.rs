@@ -1,6 +1,7 @@
-//! The paper's published numbers (Isele et al., ICRA 2018; see
-//! ../shared/PAPER.md), printed next to ours. Percentages are in percent,
-//! times in seconds.
+//! The paper's published numbers, printed next to ours: Isele et al.,
+//! "Navigating Occluded Intersections with Autonomous Vehicles using Deep
+//! Reinforcement Learning", ICRA 2018 (Tables I-III).
+//! Percentages are in percent, times in seconds.
 
 /// The five scenarios of Tables I and III, in the paper's order.
 pub const SCENARIOS: [&str; 5] = ["right", "left", "left2", "forward", "challenge"];
