@@ -6,7 +6,7 @@
 CARGO ?= cargo
 RUN_ARGS ?=
 
-.PHONY: all setup pydeps deploydeps build run test faults lint fmt fuzz clean-libtorch bench-learner sumo-check
+.PHONY: all setup pydeps deploydeps build run test faults lint fmt fuzz clean-libtorch bench-learner sumo-check docs
 
 all: build
 
@@ -23,7 +23,7 @@ build: setup
 	$(CARGO) build --release --bin crossroads
 
 # The main job: train DQN-TTG on left (the built-in experiment ttg-left)
-# into runs/left-ttg; a second `make run` continues or re-reports it.
+# into runs/ttg-left; a second `make run` continues or re-reports it.
 run: build
 	./target/release/crossroads train --resume $(RUN_ARGS)
 
@@ -59,6 +59,12 @@ lint: setup
 
 fmt:
 	$(CARGO) fmt --all
+
+# The documents generated from the code and reports/paper/results.json:
+# docs/reference/cli.md, docs/reference/config.md and README.md's results
+# (a test fails when they differ).
+docs: build
+	./target/release/crossroads docs
 
 # The fault-injection suite, long: every kill -9 repeated many times (the
 # quick version runs in `make test`).

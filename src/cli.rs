@@ -179,7 +179,7 @@ pub enum Command {
     /// separate processes over the local transport, with a progress bar,
     /// greedy evaluations, checkpoints and a learning curve.
     ///
-    /// Writes runs/<scenario>-<actions>/ (or --out): config.toml, logs/,
+    /// Writes runs/<actions>-<scenario>/ (or --out): config.toml, logs/,
     /// checkpoints/, replay/ (snapshot), curve.csv and curve.png (greedy
     /// success, collisions and timeouts over time), best/ (the best
     /// evaluated weights, usable as `eval --policy`), summary.json. Serves
@@ -195,10 +195,33 @@ pub enum Command {
     /// Writes into --out: README.md (the report), table1.csv, table2.csv,
     /// table3.csv, fig3.png (TTC threshold sweeps with the DQN points),
     /// curves.png (learning curves), training.csv (time and environment
-    /// steps of each run), ttc/ (the sweeps), configs/ and runs/ (one
-    /// `crossroads train` run per experiment of configs/experiments/).
-    /// A run that finished is reused; one that was interrupted resumes.
+    /// steps of each run), results.json (every number, the TTC sweeps
+    /// included), mode (quick or full: a folder holds one kind), configs/
+    /// and runs/ (one `crossroads train` run per experiment of
+    /// configs/experiments/). A run that finished is reused; one that was
+    /// interrupted resumes.
     Reproduce(ReproduceArgs),
+    /// Regenerate the documents made from the code and the committed
+    /// report: docs/reference/cli.md (this command line),
+    /// docs/reference/config.md (the configuration schema and defaults)
+    /// and the results block of README.md (from
+    /// reports/paper/results.json).
+    ///
+    /// Run it from the repository root after changing a flag, a config key
+    /// or the report; `--check` only compares, and exits 1 naming each
+    /// document that differs.
+    Docs(DocsArgs),
+}
+
+/// `crossroads docs`.
+#[derive(Debug, Clone, Args)]
+pub struct DocsArgs {
+    /// Compare only: exit 1 when a generated document differs.
+    #[arg(long)]
+    pub check: bool,
+    /// The repository's root folder.
+    #[arg(long, default_value = ".", value_name = "DIR")]
+    pub root: PathBuf,
 }
 
 /// `crossroads reproduce`.
@@ -277,7 +300,7 @@ pub struct TrainArgs {
     /// Wall-clock budget in minutes (train.max_minutes).
     #[arg(long, value_name = "MIN")]
     pub minutes: Option<f64>,
-    /// Run folder [default: runs/<scenario>-<actions>].
+    /// Run folder [default: runs/<actions>-<scenario>].
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Continue the run in the folder: its config.toml (unless --config),
@@ -465,7 +488,8 @@ pub enum CheckpointsAction {
 /// A policy driving an action set on a scenario (`eval`, `render`).
 #[derive(Debug, Args)]
 pub struct PolicyArgs {
-    /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, or a trained
+    /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, never (the ego
+    /// waits out the time limit: traffic alone), or a trained
     /// network: a checkpoint folder (runs/NAME/best,
     /// runs/NAME/checkpoints/ckpt-...) or a weights .safetensors file;
     /// several networks of the same kind joined by commas act on the mean
@@ -490,8 +514,8 @@ pub struct PolicyArgs {
     #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]
     pub shield: Option<String>,
     /// Number format of a network policy's trunk: f32 (the same result on
-    /// every machine), bf16, or auto (what a training run's actors use:
-    /// bf16 for a conv trunk on a CPU with AMX-BF16).
+    /// every machine), bf16, or auto (what a training run's actors use,
+    /// which is f32: auto picks bf16 only for the learner's updates).
     #[arg(long, default_value = "f32", value_name = "auto|f32|bf16")]
     pub precision: crossroads_config::PrecisionSetting,
 }

@@ -57,5 +57,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Actor(args) => commands::actor::run(&config, &args),
         Command::Train(args) => commands::train::run(&config, &args),
         Command::Reproduce(args) => commands::reproduce::run(&cli.global, &args),
+        Command::Docs(args) => commands::docs::run(&args),
     }
 }

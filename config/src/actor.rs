@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 use super::Checks;
 
 /// How an actor sends its batches to the replay server.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum ActorTransport {
     /// gRPC streaming insert to `transport.replay_endpoint`, any host.
@@ -20,7 +22,7 @@ pub enum ActorTransport {
 /// An actor process (`crossroads actor`): M environments of `[sim]`'s scenario,
 /// one batched forward pass per step, epsilon-greedy exploration from the
 /// Ape-X ladder, n-step transitions pushed in batches.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ActorConfig {
     /// Environments stepped in parallel per process (M). 1 to 4096.

@@ -10,7 +10,9 @@ use serde::{Deserialize, Serialize};
 use super::Checks;
 
 /// Which optimizer trains the online network.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum OptimizerKind {
     /// RMSProp as in the paper (Mnih et al. 2013/2015): uncentered, no
@@ -22,7 +24,9 @@ pub enum OptimizerKind {
 }
 
 /// How the target network follows the online one.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum TargetUpdate {
     /// Copied every `target_period` updates (DQN).
@@ -36,7 +40,7 @@ pub enum TargetUpdate {
 /// The learner (`crossroads learner`): dueling double DQN with n-step
 /// returns, trained from the replay server, publishing weights and keeping
 /// checkpoints.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct LearnerConfig {
     /// gRPC address of the learner service (weights, checkpoints, status);
@@ -127,6 +131,7 @@ pub struct LearnerConfig {
     /// (`CROSSROADS_TOKEN`) and guards both services. Kept only so that a
     /// file that still sets it is refused with that advice.
     #[serde(skip_serializing)]
+    #[schemars(skip)]
     pub api_token: Option<String>,
     /// Stop after this many updates (counted over the run's life, so a
     /// resumed run stops at the same step); 0 trains until shutdown.

@@ -7,6 +7,13 @@
 //! flags and a role's own flags. Unknown keys, wrong types and out-of-range
 //! values are errors that name where the value came from, the key and the
 //! problem.
+//!
+//! A built-in experiment ([`ConfigLoader::base`]) may lie between the
+//! defaults and the file. Each section is a module with its struct (unknown
+//! keys refused), its defaults and a `validate` that reports every problem
+//! under its dotted key; a [`ConfigProblem`] names origin, key and problem.
+//! Keys of the older schema ([`MOVED_KEYS`]) are read at their new place
+//! with a warning, and refused when two disagree.
 
 use std::fmt;
 use std::ops::RangeInclusive;
@@ -95,8 +102,15 @@ const COMMAND_LINE: &str = "command line";
 /// Prefix of the environment variables that override the config.
 pub const ENV_PREFIX: &str = "CROSSROADS_";
 
+/// The schema of [`Config`]: every section and key with its doc comment,
+/// type and allowed values. `docs/reference/config.md` is generated from
+/// it (`crossroads docs`), so the reference cannot drift from the code.
+pub fn schema() -> schemars::Schema {
+    schemars::schema_for!(Config)
+}
+
 /// The whole configuration of a run, one section per concern.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
     /// Threads of the process.

@@ -9,7 +9,9 @@ use serde::{Deserialize, Serialize};
 use super::Checks;
 
 /// How importance weights are normalized.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum WeightNormalization {
     /// Divide by the largest weight any item of the table could get (that
@@ -22,7 +24,7 @@ pub enum WeightNormalization {
 }
 
 /// The replay server (`crossroads replay`): one prioritized table.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ReplayConfig {
     /// gRPC address to serve on; port 0 picks a free port.

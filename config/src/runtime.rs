@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::Checks;
 
 /// Threads of the process and the number format of its networks.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RuntimeConfig {
     /// Threads of the async runtime that serves gRPC, metrics and transports.
@@ -19,30 +19,30 @@ pub struct RuntimeConfig {
     /// `compute_threads`' choice. 1 by default: this project's networks
     /// are small, and with OpenMP threads that sleep between operations
     /// (`OMP_WAIT_POLICY=passive`, the default) every operation spread
-    /// over two threads pays a wake-up. Measured on 2 cores: MLP update
-    /// 463 updates/s on 1 thread, 323 on 2; an actor at M = 32 stores
-    /// 1.3x more transitions/s; and one thread keeps its pace beside a
-    /// busy process. At most 1024.
+    /// over two threads pays a wake-up, and one thread keeps its pace
+    /// beside a busy process (figures: reports/performance/README.md,
+    /// "libtorch threads"). At most 1024.
     pub torch_threads: usize,
     /// libtorch intra-op threads of the learner's training thread; 0 (the
     /// default) means `torch_threads`. The conv experiments set 2: a conv
-    /// update has products big enough to split (on 2 AMD EPYC cores, 44
-    /// against 30 updates/s in `bench learner`, and 1.3x the updates in
-    /// the first two minutes of `train` beside its actors), where an MLP's
-    /// does not (463 against 323 updates/s). At most 1024.
+    /// update has products big enough to pay for splitting, where an
+    /// MLP's does not (figures: reports/performance/README.md, "libtorch
+    /// threads"). At most 1024.
     pub learner_torch_threads: usize,
     /// Number format of the networks an actor and the learner run:
     /// `auto` (the default) computes a conv trunk in bf16 (fp32 master
-    /// weights) on a CPU with AMX-BF16 matrix units, where it measured
-    /// faster, and everything else in fp32; `f32` always; `bf16` asks for
-    /// it on any CPU (slow without hardware bf16). `eval` and `reproduce`
-    /// run fp32 unless told otherwise, so a cell does not depend on the
-    /// machine.
+    /// weights) on a CPU with AMX-BF16 matrix units, the one case where it
+    /// measured faster (reports/performance/README.md, "bf16"), and
+    /// everything else in fp32; `f32` always; `bf16` asks for it on any
+    /// CPU (slow without hardware bf16). `eval` and `reproduce` run fp32
+    /// unless told otherwise, so a cell does not depend on the machine.
     pub precision: PrecisionSetting,
 }
 
 /// `runtime.precision`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum PrecisionSetting {
     /// bf16 where it pays on this CPU, fp32 elsewhere.

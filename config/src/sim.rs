@@ -11,10 +11,12 @@ use crossroads_types::spec::ObservationLayout;
 use super::{ACTION_SETS, Checks};
 
 /// What a run simulates.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimConfig {
-    /// Scenario: a built-in name (`crossroads scenarios`) or a TOML file.
+    /// Scenario: a built-in name (`right`, `left`, `left2`, `forward`,
+    /// `challenge`, `occluded`, `occluded-<30|60|90>[-left|-right|-both]`)
+    /// or a TOML file.
     pub scenario: String,
     /// Action set: `ttg` (5), `sequential` (12) or `creep` (3).
     pub action_set: String,

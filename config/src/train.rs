@@ -8,7 +8,7 @@ use super::{ActorTransport, Checks};
 
 /// `crossroads train`: the replay, the learner and `actor.count` actor processes
 /// on this machine. The update budget is `learner.max_updates`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrainConfig {
     /// How the actors push transitions and get weights: `shm` (iceoryx2,

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::Checks;
 
 /// How roles reach each other.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TransportConfig {
     /// The replay server as clients (actors, learner) reach it, e.g.
@@ -56,7 +56,7 @@ pub struct TransportConfig {
 /// clients (actors, learner, the CLI) of one run use it. Files are PEM.
 /// One file describes a run, so a process reads the server half when it
 /// serves and the client half when it calls.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TlsConfig {
     /// Server side: the certificate chain the replay and learner servers
@@ -104,7 +104,7 @@ impl TlsConfig {
 /// file: it comes from a file (`token_file`, e.g. a mounted secret) or from
 /// the environment variable named by `token_env`. With neither, calls need
 /// no token.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct AuthConfig {
     /// A file holding the token (surrounding whitespace is ignored). Wins

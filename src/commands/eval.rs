@@ -1,4 +1,9 @@
 //! `crossroads eval`: a policy on a scenario for N seeded trials.
+//!
+//! A thin wrapper over `crossroads_sim`: `run_trials` and `summarize` for
+//! the report, `go_risk` for `--risk` and `--missed`, the failed trials
+//! listed for `render` with `--failures`, and with `--shield` the policy
+//! wrapped in `ShieldedPolicy` (as `render` does).
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -73,7 +78,7 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
             Box::new(net)
         }
         None => parse_policy(&args.policy).context(
-            "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s> or random)",
+            "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, random or never)",
         )?,
     };
     let mut shield = None;

@@ -4,6 +4,7 @@ pub mod actor;
 pub mod bench;
 pub mod checkpoints;
 pub mod config;
+pub mod docs;
 pub mod doctor;
 pub mod eval;
 pub mod health;

@@ -672,6 +672,16 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     ])));
     let saved: serde_json::Value = serde_json::from_str(&saved).expect("save prints JSON");
     let id = saved["id"].as_str().expect("checkpoint id").to_owned();
+    let listed = text(&run(crossroads().args([
+        "checkpoints",
+        "--learner",
+        &learner_url,
+        "list",
+    ])));
+    assert!(
+        listed.contains(&id),
+        "list names the saved checkpoint {id}: {listed}"
+    );
     let pulled_dir = dir.path().join("pulled");
     let pulled = text(&run(crossroads()
         .args([

@@ -3,11 +3,13 @@
 
 mod cli;
 mod deploy;
+mod docs;
 mod experiments;
 mod faults;
 mod graph;
 mod learner;
 mod procs;
+mod readme;
 mod replay;
 mod reproduce;
 mod security;

@@ -1,6 +1,9 @@
 //! The six per-transition columns, struct-of-arrays, written once for every
 //! place that holds transitions: a [`TransitionBatch`](crate::TransitionBatch),
 //! a replay table's ring, a table's snapshot image, a sample.
+//!
+//! [`Columns::write_le`] and [`Columns::read_le`] are the columns' bytes,
+//! little-endian, in shared-memory frames and in snapshots.
 
 use crate::batch::{BatchError, RejectReason, Transition};
 

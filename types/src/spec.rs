@@ -1,6 +1,12 @@
 //! What a Q-network is: the observation it reads, the actions it scores and
 //! the shape of its trunk. A [`NetworkSpec`] travels with every copy of the
 //! weights, so weights are only ever applied to a network they fit.
+//!
+//! [`ObservationLayout::named`] knows the simulator's four views
+//! ([`ObservationLayout::KINDS`]). Neither this crate nor
+//! `crossroads_model` depends on the simulator, so a root test
+//! (`tests/it/learner.rs`) checks that the layouts match what
+//! `crossroads_sim` writes. Errors are a [`SpecError`].
 
 use serde::{Deserialize, Serialize};
 
@@ -105,7 +111,9 @@ pub fn num_actions_of(action_set: &str) -> Result<i64, SpecError> {
 }
 
 /// The trunk between the observation and the dueling heads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum TrunkKind {
     /// Fully connected layers over the flat observation, ReLU after each.

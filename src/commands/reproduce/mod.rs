@@ -10,7 +10,7 @@
 //! the paper's numbers beside ours, figures, and what each run cost
 //! (`report.rs`).
 
-mod paper;
+pub(crate) mod paper;
 mod report;
 
 use std::path::PathBuf;
@@ -298,7 +298,11 @@ pub struct Results {
     pub sweeps: Vec<TuneReport>,
     pub runs: Vec<RunRecord>,
     pub started: String,
+    /// Wall time of the whole call, training included.
     pub minutes: f64,
+    /// The runs this call trained or resumed; the others were reused
+    /// finished (their own training time is in their summaries).
+    pub trained: Vec<String>,
 }
 
 /// Runs the reproduction.
@@ -323,14 +327,13 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
         .iter()
         .flat_map(|name| (1..=plan.members(name)).map(move |k| (name.clone(), k)))
         .collect();
+    let mut trained = Vec::new();
     for (i, (name, k)) in runs.iter().enumerate() {
-        eprintln!(
-            "[{}/{}] {}",
-            i + 1,
-            runs.len(),
-            experiments::member_run(name, *k)
-        );
-        train(&plan, name, *k, &shutdown)?;
+        let run = experiments::member_run(name, *k);
+        eprintln!("[{}/{}] {run}", i + 1, runs.len());
+        if train(&plan, name, *k, &shutdown)? {
+            trained.push(run);
+        }
     }
 
     let mut results = Results {
@@ -340,6 +343,7 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
         baselines_only: !plan.dqn,
         machine: super::train::machine(),
         started: now_utc(),
+        trained,
         ..Results::default()
     };
     evaluate_all(&plan, &mut results, &shutdown)?;
@@ -381,11 +385,11 @@ fn check_mode(plan: &Plan) -> anyhow::Result<()> {
 }
 
 /// Trains member `member` (from 1) of `experiment` unless its run
-/// finished; resumes an interrupted one. Members after the first train from
+/// finished (then `false`: reused); resumes an interrupted one. Members after the first train from
 /// seed `member` (actor and learner). The child is `crossroads train` in
 /// this process group, so Ctrl-C reaches it too and it stops cleanly (a
 /// later reproduce resumes it).
-fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> anyhow::Result<()> {
+fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> anyhow::Result<bool> {
     let dir = plan.run_dir(&experiments::member_run(experiment, member));
     if let Some(s) = Summary::load(&dir)?
         && s.status.is_complete()
@@ -397,7 +401,7 @@ fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> any
             s.updates,
             s.wall_seconds / 60.0
         );
-        return Ok(());
+        return Ok(false);
     }
     let resume = dir
         .join("checkpoints")
@@ -467,7 +471,7 @@ fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> any
         "training {experiment} failed ({status}); its logs are in {}",
         dir.join("logs").display()
     );
-    Ok(())
+    Ok(true)
 }
 
 /// The TTC sweeps and every DQN cell the parts need.
