@@ -171,7 +171,7 @@ fn paragraphs(text: &str) -> String {
 
 /// `text` ending in a full stop (or its own closing punctuation).
 fn sentence(text: &str) -> String {
-    if text.is_empty() || text.ends_with(['.', '!', '?', ':', ')']) {
+    if text.is_empty() || text.ends_with(['.', '!', '?', ':']) || text.ends_with(".)") {
         text.to_owned()
     } else {
         format!("{text}.")
