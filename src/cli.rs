@@ -500,6 +500,12 @@ pub struct PolicyArgs {
     /// occluded-<30|60|90>[-left|-right|-both], or a scenario TOML file.
     #[arg(long, default_value = "left")]
     pub scenario: String,
+    /// Who drives the traffic: sumo (SUMO's drivers, the paper's), human
+    /// (reaction 0.7-1.5 s and the rest as measured on roads;
+    /// docs/drivers.md), or a drivers TOML file [default: the scenario's
+    /// own].
+    #[arg(long, value_name = "PRESET|FILE")]
+    pub drivers: Option<String>,
     /// Action set the policy drives.
     #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
     pub actions: ActionSet,
@@ -563,6 +569,11 @@ pub struct TuneTtcArgs {
     /// Scenario name or scenario TOML file.
     #[arg(long, default_value = "left")]
     pub scenario: String,
+    /// Who drives the traffic: sumo, human or a drivers TOML file
+    /// [default: the scenario's own]; the paper's rule then tunes TTC for
+    /// that population.
+    #[arg(long, value_name = "PRESET|FILE")]
+    pub drivers: Option<String>,
     /// Action set the TTC rule drives.
     #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
     pub actions: ActionSet,

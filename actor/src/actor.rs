@@ -65,7 +65,10 @@ pub struct ActorSettings {
 
 /// `[sim]`'s scenario, compiled, and its action set.
 fn load_sim(sim: &SimConfig) -> Result<(Arc<Scenario>, ActionSet), ActorError> {
-    let scenario = Arc::new(Scenario::load(&sim.scenario)?);
+    let scenario = Arc::new(Scenario::load_with_drivers(
+        &sim.scenario,
+        sim.drivers.as_deref(),
+    )?);
     let action_set: ActionSet = sim
         .action_set
         .parse()

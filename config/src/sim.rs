@@ -20,6 +20,12 @@ pub struct SimConfig {
     pub scenario: String,
     /// Action set: `ttg` (5), `sequential` (12) or `creep` (3).
     pub action_set: String,
+    /// Who drives the traffic: a preset (`sumo`: SUMO's drivers, the
+    /// paper's; `human`: reaction 0.7-1.5 s and the rest as measured on
+    /// roads, docs/drivers.md) or a drivers TOML file. Unset: the
+    /// scenario's own (its `[drivers]` table, else `sumo`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drivers: Option<String>,
     /// Observation the network reads: `ttg`, `ttg-occlusion`, `sequential`
     /// or `sequential-occlusion`. Unset: the paper's pairing, derived when a
     /// role loads the scenario (the Sequential grid for Sequential actions,
@@ -34,6 +40,7 @@ impl Default for SimConfig {
         Self {
             scenario: "left".to_owned(),
             action_set: "ttg".to_owned(),
+            drivers: None,
             observation: None,
         }
     }

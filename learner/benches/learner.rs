@@ -17,6 +17,7 @@ fn updates(c: &mut Criterion) {
             ..LearnerConfig::default()
         };
         let sim = SimConfig {
+            drivers: None,
             observation: Some("ttg".to_owned()),
             ..SimConfig::default()
         };

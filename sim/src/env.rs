@@ -177,6 +177,8 @@ impl Env {
     pub fn reset(&mut self, seed: u64) {
         self.rng = Xoshiro256PlusPlus::seed_from_u64(seed);
         self.traffic.clear();
+        self.traffic
+            .seed_drivers(crate::seed::splitmix64(seed ^ 0xD21F_E25D_0B5E_ED00));
         self.occluders.clear();
         self.occluders
             .extend_from_slice(self.scenario.fixed_obstacles());
@@ -360,6 +362,7 @@ impl Env {
                         v,
                         merge: true,
                         on_junction: true,
+                        noticed_s: f64::INFINITY,
                     });
                 }
             }
@@ -399,11 +402,9 @@ impl Env {
                 self.foe_time[i] = 0.0;
                 continue;
             }
-            // Drivers need their reaction time to notice the ego.
+            // Each driver needs his reaction time to notice the ego
+            // (traffic checks it per car).
             self.foe_time[i] += dt;
-            if self.foe_time[i] < tp.reaction_delay_s - 1e-9 {
-                continue;
-            }
             let (mut rear, mut v) = (z.lane_in, 0.0);
             if z.merge && !inside {
                 // Full acceleration up to the curve speed limit.
@@ -428,6 +429,7 @@ impl Env {
                 v,
                 merge: z.merge,
                 on_junction: ego.committed || ego.s > sc.spec().ego.stop_line_s + 1e-9,
+                noticed_s: self.foe_time[i],
             });
         }
     }

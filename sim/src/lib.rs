@@ -20,7 +20,10 @@
 //! of a state (for `crossroads render`); [`Scenario::export`] gives a
 //! compiled scenario as plain data ([`ScenarioExport`]) from which
 //! `crossroads sumo-check` builds SUMO's network. The baselines also
-//! include [`NeverPolicy`] (the ego never goes: traffic alone).
+//! include [`NeverPolicy`] (the ego never goes: traffic alone). A
+//! [`DriverPopulation`] (a scenario's `[drivers]`, or a preset: `sumo`,
+//! `human`) draws each car's [`Driver`] as it enters: reaction time,
+//! braking, headway, attention.
 //!
 //! # Frame and units
 //!
@@ -167,6 +170,7 @@
 mod action;
 mod bench;
 mod car_following;
+mod drivers;
 mod env;
 mod error;
 mod eval;
@@ -191,6 +195,7 @@ pub use car_following::{
     dawdle, idm_accel, iidm_accel, iidm_accel_with, iidm_free_accel, krauss_free_accel,
     krauss_safe_speed,
 };
+pub use drivers::{Bounds, Driver, DriverPopulation, PRESETS as DRIVER_PRESETS};
 pub use env::{Ego, Env, EnvConfig, EpisodeMetrics, Outcome, StepResult, TTC_CAP_S};
 pub use error::SimError;
 pub use eval::{

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 /// Traffic vehicles: size, IDM car following, Krauss dawdling, desired
 /// speeds and how they react to the ego. Defaults are SUMO's passenger car.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrafficParams {
     /// Car length, m.

@@ -4,6 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::drivers::DriverPopulation;
 use crate::error::SimError;
 use crate::geometry::{OrientedRect, Vec2};
 use crate::occlusion::{ObstacleSpec, OcclusionSpec, Side};
@@ -70,6 +71,12 @@ pub struct ScenarioSpec {
     /// Traffic vehicle parameters.
     #[serde(default)]
     pub traffic: TrafficParams,
+    /// Who drives the traffic, drawn per car as it enters its lane. Unset
+    /// (the `sumo` preset): every car has the `[traffic]` driver. Its
+    /// speed factor bounds replace `[traffic]`'s when the scenario is
+    /// compiled.
+    #[serde(default)]
+    pub drivers: DriverPopulation,
     /// Rewards.
     #[serde(default)]
     pub rewards: Rewards,
@@ -270,6 +277,17 @@ impl Scenario {
         }
     }
 
+    /// [`Scenario::load`], then, when `drivers` names a preset (`sumo`,
+    /// `human`) or a drivers TOML file, with that population in place of
+    /// the scenario's own.
+    pub fn load_with_drivers(name_or_path: &str, drivers: Option<&str>) -> Result<Self, SimError> {
+        let scenario = Self::load(name_or_path)?;
+        match drivers {
+            Some(d) => scenario.with_drivers(DriverPopulation::load(d)?),
+            None => Ok(scenario),
+        }
+    }
+
     /// Reads a scenario file.
     pub fn from_file(path: &std::path::Path) -> Result<Self, SimError> {
         let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
@@ -284,10 +302,20 @@ impl Scenario {
         Self::compile(parse_spec(text, what)?)
     }
 
+    /// This scenario with another driver population (a preset or a user's
+    /// table), replacing its `[drivers]`.
+    pub fn with_drivers(&self, drivers: DriverPopulation) -> Result<Self, SimError> {
+        let mut spec = self.spec.clone();
+        spec.drivers = drivers;
+        Self::compile(spec)
+    }
+
     /// Validates and compiles a description.
-    pub fn compile(spec: ScenarioSpec) -> Result<Self, SimError> {
+    pub fn compile(mut spec: ScenarioSpec) -> Result<Self, SimError> {
         let what = spec.name.clone();
         let what = what.as_str();
+        spec.drivers.check(&format!("{what} drivers"))?;
+        spec.traffic = spec.drivers.traffic(&spec.traffic);
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !positive(spec.step_s) || spec.step_limit == 0 || !positive(spec.speed_limit) {
             return Err(SimError::invalid(

@@ -10,6 +10,10 @@ use rand_distr::StandardNormal;
 use crate::car_following::{
     dawdle, iidm_accel_with, iidm_free_accel, krauss_free_accel, krauss_safe_speed,
 };
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+use crate::drivers::Driver;
 use crate::error::SimError;
 use crate::geometry::{OrientedRect, Vec2};
 use crate::params::TrafficParams;
@@ -45,6 +49,9 @@ pub struct Car {
     pub axis: Vec2,
     /// Heading, radians counter-clockwise from east.
     pub heading: f64,
+    /// Its driver, drawn from the scenario's population as it entered;
+    /// `None`: the scenario's `[traffic]` driver.
+    pub driver: Option<Driver>,
 }
 
 impl Car {
@@ -95,6 +102,10 @@ pub struct EgoConflict {
     /// (its junction leader); before, they give way with at most
     /// `yield_decel` or drive on.
     pub on_junction: bool,
+    /// Seconds since the lane's drivers could first see the ego coming;
+    /// each reacts once his own reaction time has passed (infinite where
+    /// the ego is simply a leader to follow).
+    pub noticed_s: f64,
 }
 
 /// Constant deceleration, m/s², that makes a car at speed `v` reach a point
@@ -127,6 +138,9 @@ pub struct Traffic {
     brake_time_s: f64,
     brake_light_s: f64,
     guard_hits: u64,
+    /// Draws each entering car's driver: a stream of its own, so a
+    /// population that draws nothing leaves every other draw as it was.
+    drivers_rng: Xoshiro256PlusPlus,
 }
 
 impl Traffic {
@@ -145,7 +159,13 @@ impl Traffic {
             brake_time_s: 0.0,
             brake_light_s: 0.0,
             guard_hits: 0,
+            drivers_rng: Xoshiro256PlusPlus::seed_from_u64(0),
         }
+    }
+
+    /// Seeds the stream that draws each entering car's driver.
+    pub fn seed_drivers(&mut self, seed: u64) {
+        self.drivers_rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     }
 
     /// Removes every car and clears the counters; keeps the memory.
@@ -247,6 +267,15 @@ impl Traffic {
                     Some((ls, lv)) => (ls - len - car.s, lv),
                     None => (f64::INFINITY, 0.0),
                 };
+                // The parameters as this car's driver applies them.
+                let own;
+                let p = match car.driver {
+                    Some(d) => {
+                        own = d.params(p);
+                        &own
+                    }
+                    None => p,
+                };
                 let a_free = if p.krauss_free_road {
                     krauss_free_accel(car.v, car.v_desired, dt, p)
                 } else {
@@ -254,8 +283,10 @@ impl Traffic {
                 };
                 let mut a = iidm_accel_with(a_free, car.v, car.v_desired, gap, v_lead, p);
                 match foe {
-                    EgoFoe::Conflict(c) => a = a.min(react(car, a_free, &c, p)),
-                    EgoFoe::None => car.yielding = false,
+                    EgoFoe::Conflict(c) if notices(car, &c, p) => {
+                        a = a.min(react(car, a_free, &c, p));
+                    }
+                    _ => car.yielding = false,
                 }
                 let floor = (car.v - p.emergency_decel * dt).max(0.0);
                 let mut v_new = (car.v + a.max(-p.emergency_decel) * dt).max(0.0);
@@ -356,9 +387,19 @@ impl Traffic {
         self.pending[li] -= 1;
         self.next_factor[li] = None;
         self.insertions += 1;
-        let car = new_car(&mut self.next_id, lane, li, 0.0, v, v_desired, p.length);
+        let mut car = new_car(&mut self.next_id, lane, li, 0.0, v, v_desired, p.length);
+        car.driver = scenario.spec().drivers.draw(p, &mut self.drivers_rng);
         cars.push_back(car);
     }
+}
+
+/// Whether the car's driver reacts to the ego this step: once his reaction
+/// time has passed since his lane's drivers could first see it coming, and,
+/// if he is inattentive, only to an ego that has merged into his lane ahead
+/// of him (he follows it as any leader).
+fn notices(car: &Car, c: &EgoConflict, p: &TrafficParams) -> bool {
+    c.noticed_s >= p.reaction_delay_s - 1e-9
+        && (car.driver.is_none_or(|d| d.attentive) || (c.merge && c.occupying && car.s < c.rear))
 }
 
 /// SUMO's brake light for a step from speed `v` to `v_new`
@@ -477,6 +518,7 @@ fn new_car(
         pos: Vec2::default(),
         axis: Vec2::default(),
         heading: 0.0,
+        driver: None,
     };
     *next_id = next_id.wrapping_add(1);
     place(&mut car, lane, length);
@@ -540,6 +582,7 @@ mod tests {
             pos: Vec2::default(),
             axis: Vec2::default(),
             heading: 0.0,
+            driver: None,
         };
         place(&mut car, &s.lanes()[0], 5.0);
         t.lanes[0].push_back(car);
@@ -591,7 +634,73 @@ mod tests {
             v: 0.0,
             merge: false,
             on_junction: occupying,
+            noticed_s: f64::INFINITY,
         })]
+    }
+
+    /// One step of a lone car at 20 m/s at lane coordinate `at`, short of
+    /// an ego on the junction from 150 m, whose lane saw the ego coming
+    /// `noticed_s` ago; the car's speed after the step.
+    fn speed_after_one_step(at: f64, driver: Option<Driver>, noticed_s: f64) -> f64 {
+        let s = Scenario::builtin("forward").unwrap();
+        let mut t = lone_car(&s, at, 20.0);
+        t.lanes[0][0].driver = driver;
+        let mut foes = crossing(0.0, 10.0, true);
+        if let EgoFoe::Conflict(c) = &mut foes[0] {
+            c.noticed_s = noticed_s;
+        }
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+        t.step(&s, &foes, &mut rng);
+        t.lanes[0][0].v
+    }
+
+    fn human(reaction_s: f64, emergency_decel: f64, attentive: bool) -> Driver {
+        Driver {
+            reaction_s,
+            yield_decel: 3.0,
+            emergency_decel,
+            headway: 1.5,
+            attentive,
+        }
+    }
+
+    #[test]
+    fn each_driver_reacts_after_his_own_reaction_time() {
+        // A stop short of the lane needs 3.3 m/s²; dawdling alone takes at
+        // most sigma a dt = 0.26 m/s off in a step.
+        let braked = |v: f64| v < 20.0 - 0.5;
+        // The scenario's driver (0.2 s) reacts as soon as his lane has seen
+        // the ego for one step; a slow driver not before his 1.5 s.
+        assert!(braked(speed_after_one_step(90.0, None, 0.2)));
+        assert!(!braked(speed_after_one_step(
+            90.0,
+            Some(human(1.5, 9.0, true)),
+            1.4
+        )));
+        assert!(braked(speed_after_one_step(
+            90.0,
+            Some(human(1.5, 9.0, true)),
+            1.5
+        )));
+        // An inattentive driver never brakes for an ego crossing his lane.
+        assert!(!braked(speed_after_one_step(
+            90.0,
+            Some(human(0.7, 9.0, false)),
+            10.0
+        )));
+    }
+
+    #[test]
+    fn a_driver_brakes_no_harder_than_he_can() {
+        // 30 m short of an ego on the junction at 20 m/s a stop needs
+        // 6.7 m/s²: a driver who can brake 9 m/s² does, one who can brake
+        // 5.5 brakes that hard and no harder (dawdling may take 0.26 m/s
+        // more off).
+        let dt = 0.2;
+        let weak = 20.0 - speed_after_one_step(120.0, Some(human(0.7, 5.5, true)), 10.0);
+        let strong = 20.0 - speed_after_one_step(120.0, Some(human(0.7, 9.0, true)), 10.0);
+        assert!(weak <= 5.5 * dt + 0.27 && weak >= 5.5 * dt - 1e-9, "{weak}");
+        assert!(strong > 6.0 * dt, "{strong}");
     }
 
     #[test]
@@ -610,6 +719,7 @@ mod tests {
             v: 0.0,
             merge: true,
             on_junction: true,
+            noticed_s: f64::INFINITY,
         })];
         let mut braked = false;
         for _ in 0..200 {
@@ -721,6 +831,7 @@ mod tests {
             v: 5.0,
             merge: true,
             on_junction: false,
+            noticed_s: f64::INFINITY,
         })];
         let decel = |at: f64, rng: &mut Xoshiro256PlusPlus| {
             let mut t = lone_car(&s, at, 20.0);

@@ -63,7 +63,8 @@ pub struct Loaded {
 /// set; errors name the flag at fault.
 pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
     let scenario = Arc::new(
-        Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
+        Scenario::load_with_drivers(&args.scenario, args.drivers.as_deref())
+            .with_context(|| format!("scenario {:?}", args.scenario))?,
     );
     let mut policy: Box<dyn Policy> = match NetworkPolicy::load(Path::new(&args.policy))
         .with_context(|| format!("--policy {}", args.policy))?
@@ -149,6 +150,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
         if let (Some(f), Some(object)) = (&failures, value.as_object_mut()) {
             object.insert("failures".to_owned(), serde_json::to_value(f)?);
         }
+        if let Some(object) = value.as_object_mut() {
+            object.insert(
+                "drivers".to_owned(),
+                serde_json::to_value(&scenario.spec().drivers)?,
+            );
+        }
         if let (Some((params, counters)), Some(object)) = (&shield, value.as_object_mut()) {
             object.insert(
                 "shield".to_owned(),
@@ -158,6 +165,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
         println!("{value}");
     } else {
         print!("{}", text(&report, wall));
+        println!("  drivers      {}", scenario.spec().drivers);
         if let Some((_, counters)) = &shield {
             let c = counters.stats();
             println!(

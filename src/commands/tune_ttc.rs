@@ -16,7 +16,8 @@ use crate::progress;
 /// Runs the sweep, prints it, and writes CSV and PNG under `--out`.
 pub fn run(args: &TuneTtcArgs) -> anyhow::Result<ExitCode> {
     let scenario = Arc::new(
-        Scenario::load(&args.scenario).with_context(|| format!("scenario {:?}", args.scenario))?,
+        Scenario::load_with_drivers(&args.scenario, args.drivers.as_deref())
+            .with_context(|| format!("scenario {:?}", args.scenario))?,
     );
     let thresholds = match &args.thresholds {
         Some(spec) => parse_thresholds(spec).context("--thresholds")?,

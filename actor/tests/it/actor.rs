@@ -267,6 +267,7 @@ fn the_q_network_drives_actors_of_every_kind() {
         let mut sim = SimConfig {
             scenario: scenario.to_owned(),
             action_set: action_set.to_owned(),
+            drivers: None,
             observation: None,
         };
         crossroads_actor::resolve_observation(&mut sim).expect("resolves");

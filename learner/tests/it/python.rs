@@ -70,6 +70,7 @@ fn learner_weights_load_in_python_safetensors() {
         ..Default::default()
     };
     let sim = crossroads_config::SimConfig {
+        drivers: None,
         observation: Some("ttg".to_owned()),
         ..Default::default()
     };

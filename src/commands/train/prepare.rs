@@ -26,8 +26,14 @@ pub struct Run {
 pub fn prepare(config: &Config, out: &Path, resume: bool) -> anyhow::Result<Run> {
     let mut c = config.clone();
     let scenario = Arc::new(
-        Scenario::load(&c.sim.scenario)
-            .with_context(|| format!("sim.scenario {:?}", c.sim.scenario))?,
+        Scenario::load_with_drivers(&c.sim.scenario, c.sim.drivers.as_deref()).with_context(
+            || {
+                format!(
+                    "sim.scenario {:?}, sim.drivers {:?}",
+                    c.sim.scenario, c.sim.drivers
+                )
+            },
+        )?,
     );
     let actions: ActionSet = c
         .sim
