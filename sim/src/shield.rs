@@ -69,6 +69,7 @@
 
 use serde::Serialize;
 
+use crate::drivers::DriverPopulation;
 use crate::env::Env;
 use crate::error::SimError;
 use crate::geometry::OrientedRect;
@@ -156,8 +157,37 @@ impl Default for ShieldParams {
 }
 
 impl ShieldParams {
+    /// These assumptions made sound for every driver inside `drivers`'
+    /// bounds: the slowest reaction, the fastest car (and phantom), the
+    /// least braking a reacting driver applies (his emergency bound's
+    /// lower end, for an ego on the junction), the hardest braking a car
+    /// may stop with; no driver is trusted to give way where some are
+    /// inattentive. Bounds the population leaves unset keep these values.
+    pub fn assuming(self, drivers: &DriverPopulation) -> Self {
+        let mut p = self;
+        if let Some(r) = drivers.reaction_s {
+            p.reaction_s = p.reaction_s.max(r.max);
+        }
+        if let Some(m) = drivers.speed_factor_max {
+            p.speed_factor = p.speed_factor.max(m);
+            p.phantom_factor = p.phantom_factor.max(m);
+        }
+        if let Some(e) = drivers.emergency_decel {
+            p.yield_decel = p.yield_decel.min(e.min);
+            p.fall_in_decel = p.fall_in_decel.min(e.min);
+            p.follower_decel = p.follower_decel.min(e.min);
+            p.hard_decel = p.hard_decel.max(e.max);
+        }
+        if drivers.inattentive_share > 0.0 {
+            p.yield_decel = 0.0;
+        }
+        p
+    }
+
     /// Parses `default` or comma-separated `key=value` overrides of the
-    /// defaults, e.g. `speed_factor=1.1,margin_s=0.3`.
+    /// defaults, e.g. `speed_factor=1.1,margin_s=0.3`; `assume=human` (a
+    /// driver preset or file) first sets them by [`ShieldParams::assuming`]
+    /// that population.
     pub fn parse(spec: &str) -> Result<Self, SimError> {
         let err = |problem: String| SimError::PolicySpec {
             spec: spec.to_owned(),
@@ -171,6 +201,12 @@ impl ShieldParams {
             let (key, value) = part
                 .split_once('=')
                 .ok_or_else(|| err(format!("{part:?} is not key=value")))?;
+            if key.trim() == "assume" {
+                let drivers = DriverPopulation::load(value.trim())
+                    .map_err(|e| err(format!("assume: {e}")))?;
+                p = p.assuming(&drivers);
+                continue;
+            }
             let v: f64 = value
                 .trim()
                 .parse()
@@ -192,8 +228,9 @@ impl ShieldParams {
                 "hard_decel" => &mut p.hard_decel,
                 other => {
                     return Err(err(format!(
-                        "unknown key {other:?}; known: speed_factor, phantom_factor, slow_factor, \
-                         margin_s, gap_m, follower_decel, reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel"
+                        "unknown key {other:?}; known: assume, speed_factor, phantom_factor, \
+                         slow_factor, margin_s, gap_m, follower_decel, reaction_s, yield_decel, \
+                         fall_in_decel, clear_s, hard_decel"
                     )));
                 }
             };
@@ -475,6 +512,35 @@ mod tests {
     use std::sync::Arc;
 
     use super::*;
+
+    #[test]
+    fn assuming_a_population_takes_the_worst_end_of_each_bound() {
+        let p = ShieldParams::default().assuming(&DriverPopulation::human());
+        assert_eq!(p.reaction_s, 1.5);
+        assert_eq!((p.speed_factor, p.phantom_factor), (1.45, 1.45));
+        assert_eq!(
+            (p.yield_decel, p.fall_in_decel, p.follower_decel),
+            (3.4, 3.4, 3.4)
+        );
+        assert_eq!(p.hard_decel, 9.0);
+        // SUMO's drivers are what the defaults assume already.
+        let sumo = DriverPopulation::preset("sumo").unwrap();
+        assert_eq!(
+            ShieldParams::default().assuming(&sumo),
+            ShieldParams::default()
+        );
+        // Inattentive drivers give way to nobody.
+        let careless = DriverPopulation {
+            inattentive_share: 0.05,
+            ..DriverPopulation::human()
+        };
+        assert_eq!(ShieldParams::default().assuming(&careless).yield_decel, 0.0);
+        // `assume=` first, then the overrides.
+        let parsed = ShieldParams::parse("assume=human,margin_s=0.3").unwrap();
+        assert_eq!((parsed.reaction_s, parsed.margin_s), (1.5, 0.3));
+        let e = ShieldParams::parse("assume=humans").unwrap_err();
+        assert!(e.to_string().contains("sumo, human"), "{e}");
+    }
     use crate::action::ActionSet;
     use crate::env::{EnvConfig, Outcome};
     use crate::geometry::Vec2;
