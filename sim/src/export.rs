@@ -216,7 +216,7 @@ impl Scenario {
             step_limit: spec.step_limit,
             speed_limit: spec.speed_limit,
             traffic_reacts: spec.traffic_reacts,
-            traffic: spec.traffic,
+            traffic: spec.drivers.traffic(&spec.traffic),
             rewards: spec.rewards.clone(),
             ego: EgoExport {
                 params: spec.ego.params.clone(),

@@ -73,8 +73,9 @@ pub struct ScenarioSpec {
     pub traffic: TrafficParams,
     /// Who drives the traffic, drawn per car as it enters its lane. Unset
     /// (the `sumo` preset): every car has the `[traffic]` driver. Its
-    /// speed factor bounds replace `[traffic]`'s when the scenario is
-    /// compiled.
+    /// speed factor bounds replace `[traffic]`'s where a car's desired
+    /// speed is drawn (and in the export for SUMO); `[traffic]` itself
+    /// stays as written, so another population can replace this one.
     #[serde(default)]
     pub drivers: DriverPopulation,
     /// Rewards.
@@ -311,11 +312,10 @@ impl Scenario {
     }
 
     /// Validates and compiles a description.
-    pub fn compile(mut spec: ScenarioSpec) -> Result<Self, SimError> {
+    pub fn compile(spec: ScenarioSpec) -> Result<Self, SimError> {
         let what = spec.name.clone();
         let what = what.as_str();
         spec.drivers.check(&format!("{what} drivers"))?;
-        spec.traffic = spec.drivers.traffic(&spec.traffic);
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !positive(spec.step_s) || spec.step_limit == 0 || !positive(spec.speed_limit) {
             return Err(SimError::invalid(

@@ -368,9 +368,11 @@ impl Traffic {
             None => (f64::INFINITY, f64::INFINITY),
         };
         let factor = *self.next_factor[li].get_or_insert_with(|| {
+            // The population's speed factor bounds, read once per car.
+            let q = scenario.spec().drivers.traffic(p);
             let z: f64 = rng.sample(StandardNormal);
-            (p.speed_factor_mean + p.speed_factor_dev * z)
-                .clamp(p.speed_factor_min, p.speed_factor_max)
+            (q.speed_factor_mean + q.speed_factor_dev * z)
+                .clamp(q.speed_factor_min, q.speed_factor_max)
         });
         let v_desired = lane.speed_limit * factor;
         // Enter at the desired speed, or at the last car's speed if that is

@@ -819,3 +819,23 @@ fn a_shield_assuming_human_drivers_lets_none_of_them_hit_the_ego() {
     assert_eq!(r.collision_rate, 0.0, "{r:?}");
     assert!(r.success_rate > 0.85, "{r:?}");
 }
+
+/// Replacing a population replaces it whole: a scenario whose `[drivers]`
+/// spread desired speeds, given the `sumo` preset, draws them as the
+/// scenario's `[traffic]` says again.
+#[test]
+fn another_population_replaces_the_first_one_whole() {
+    use crossroads_sim::{DriverPopulation, Scenario};
+    let left = Scenario::builtin("left").unwrap();
+    let spread = left
+        .with_drivers(DriverPopulation {
+            speed_factor_dev: Some(0.3),
+            ..DriverPopulation::default()
+        })
+        .unwrap();
+    let back = spread
+        .with_drivers(DriverPopulation::preset("sumo").unwrap())
+        .unwrap();
+    assert_eq!(back.spec(), left.spec());
+    assert_eq!(spread.spec().traffic, left.spec().traffic);
+}
