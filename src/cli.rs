@@ -231,7 +231,7 @@ pub struct ReproduceArgs {
     #[arg(long, default_value = "report", value_name = "DIR")]
     pub out: PathBuf,
     /// Only these parts (repeat or comma-separate): table1, table2,
-    /// table3, fig3 [default: all].
+    /// table3, fig3, drivers [default: all].
     #[arg(long, value_delimiter = ',', value_name = "PART")]
     pub only: Vec<Part>,
     /// Wall-clock budget of each training run in minutes (on top of the
@@ -276,6 +276,9 @@ pub enum Part {
     Table3,
     /// Figure 3: TTC threshold sweeps with the DQN points.
     Fig3,
+    /// Safety across drivers: every Table I scenario against the drivers'
+    /// reaction time and the share of inattentive drivers (drivers/).
+    Drivers,
 }
 
 /// `crossroads train`. Each flag overrides the configuration key it names.

@@ -102,7 +102,13 @@ fn draw_panel(
         return Err(anyhow!("nothing to plot"));
     }
     let pad = |lo: f64, hi: f64| {
-        let span = (hi - lo).max(1e-6);
+        if hi - lo < 1e-9 {
+            // One value (a row of zero collision rates): a unit above it,
+            // so the axis reads plainly.
+            let w = hi.abs().max(1.0);
+            return (lo - 0.05 * w, hi + w);
+        }
+        let span = hi - lo;
         (lo - 0.05 * span, hi + 0.05 * span)
     };
     let (x0, x1) = pad(x0, x1);

@@ -150,6 +150,18 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     );
     let training = std::fs::read_to_string(out.join("training.csv")).expect("csv");
     assert_eq!(training.lines().count(), 8, "{training}");
+    // Safety across drivers: the networks too, bare and behind the shield.
+    assert!(md.contains("(drivers/README.md)"), "{md}");
+    let d: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("drivers/results.json")).expect("drivers results"),
+    )
+    .expect("json");
+    let rows = d["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 50, "5 scenarios x (6 reactions + 4 shares)");
+    for row in rows {
+        assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
+        assert_shielded(&row["shielded"], "dqn:", row, 300);
+    }
 
     // Again, Table I only: every run is reused, nothing trains.
     let again = reproduce(&out, &["--only", "table1"]);
@@ -234,6 +246,75 @@ fn a_tiny_reproduction_of_table2_trains_evaluates_reports_and_reuses() {
     assert!(again.status.success(), "{log2}");
     assert_eq!(log2.matches("reusing").count(), 2, "{log2}");
     assert!(!log2.contains("training into"), "{log2}");
+}
+
+/// `--only drivers` without networks: TTC tuned for human drivers and the
+/// shield alone assuming them, every Table I scenario under each reaction
+/// time and inattentive share, in drivers/; the paper's report untouched.
+#[test]
+fn safety_across_drivers_alone_writes_its_own_report() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("report");
+    let o = crossroads(&[
+        "reproduce",
+        "--baselines-only",
+        "--only",
+        "drivers",
+        "--trials",
+        "20",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    for file in [
+        "drivers/README.md",
+        "drivers/drivers.csv",
+        "drivers/results.json",
+        "drivers/fig-reaction.png",
+        "drivers/fig-inattentive.png",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing; log:\n{log}");
+    }
+    assert!(
+        !out.join("README.md").exists(),
+        "the paper's report is not rewritten"
+    );
+    let d: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("drivers/results.json")).expect("results"),
+    )
+    .expect("json");
+    assert_eq!(d["sweeps"].as_array().map(Vec::len), Some(5));
+    let rows = d["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), 50, "5 scenarios x (6 reactions + 4 shares)");
+    for row in rows {
+        assert_shielded(&row["shield_alone"], "ttc:0", row, 20);
+        assert!(row["ttg"].is_null(), "no networks: {row}");
+        // TTC's threshold is the one tuned for human drivers, every row.
+        let s = row["scenario"].as_str().expect("scenario");
+        let tuned = d["sweeps"]
+            .as_array()
+            .and_then(|w| w.iter().find(|w| w["scenario"] == s))
+            .map(|w| w["best"]["threshold"].clone());
+        assert_eq!(Some(row["ttc_threshold"].clone()), tuned, "{row}");
+        assert!(
+            row["drivers"]
+                .as_str()
+                .is_some_and(|d| d.contains("reaction")),
+            "{row}"
+        );
+    }
+    let csv = std::fs::read_to_string(out.join("drivers/drivers.csv")).expect("csv");
+    assert!(
+        csv.lines()
+            .any(|l| l.starts_with("left,reaction,1.5,shieldalone,")),
+        "{csv}"
+    );
+    let md = std::fs::read_to_string(out.join("drivers/README.md")).expect("readme");
+    assert!(
+        md.contains("![collision rate against reaction, s](fig-reaction.png)"),
+        "{md}"
+    );
 }
 
 #[test]

@@ -10,6 +10,7 @@
 //! the paper's numbers beside ours, figures, and what each run cost
 //! (`report.rs`).
 
+mod drivers;
 pub(crate) mod paper;
 mod report;
 
@@ -83,7 +84,13 @@ impl Plan {
              use --set to change a key in every run"
         );
         let parts = if args.only.is_empty() {
-            vec![Part::Table1, Part::Table2, Part::Table3, Part::Fig3]
+            vec![
+                Part::Table1,
+                Part::Table2,
+                Part::Table3,
+                Part::Fig3,
+                Part::Drivers,
+            ]
         } else {
             let mut p = args.only.clone();
             p.sort_by_key(|p| *p as u8);
@@ -142,6 +149,9 @@ impl Plan {
             paper::FIG3_SCENARIOS
                 .iter()
                 .for_each(|s| add(format!("ttg-{s}")));
+        }
+        if self.wants(Part::Drivers) {
+            drivers::experiments().for_each(&mut add);
         }
         if self.wants(Part::Table2) {
             add("creep-occluded".into());
@@ -359,8 +369,24 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
             curve,
         });
     }
+    let drivers = if plan.wants(Part::Drivers) {
+        Some(drivers::evaluate(
+            &plan,
+            &shutdown,
+            results.started.clone(),
+        )?)
+    } else {
+        None
+    };
     results.minutes = start.elapsed().as_secs_f64() / 60.0;
-    let written = report::write(&plan.out, &plan, &results)?;
+    let mut written = Vec::new();
+    // `--only drivers` leaves the paper's report as it was.
+    if plan.parts.iter().any(|&p| p != Part::Drivers) {
+        written.extend(report::write(&plan.out, &plan, &results)?);
+    }
+    if let Some(d) = &drivers {
+        written.extend(drivers::write(&plan.out.join("drivers"), d)?);
+    }
     for path in written {
         eprintln!("wrote {}", path.display());
     }
@@ -510,7 +536,8 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
         if !plan.dqn || !dirs.iter().all(|d| d.exists()) {
             return Ok(None);
         }
-        evaluate_network(plan, &dirs, scenario, actions, shield)
+        let shield = shield.then(ShieldParams::default);
+        evaluate_network(plan, &dirs, &load_scenario(scenario)?, actions, shield)
     };
     let dqn = |experiment: &str, scenario: &str, actions: ActionSet| {
         eval_run(experiment, scenario, actions, false)
@@ -525,7 +552,10 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
         if !plan.dqn {
             return Ok(None);
         }
-        let (policy, counters) = behind_shield(crossroads_sim::parse_policy(policy)?);
+        let (policy, counters) = behind_shield(
+            crossroads_sim::parse_policy(policy)?,
+            ShieldParams::default(),
+        );
         let name = policy.name();
         let sc = load_scenario(scenario)?;
         evaluate_policy(plan, &name, &sc, actions, policy.as_ref(), counters).map(Some)
@@ -644,34 +674,32 @@ fn sweep(
 }
 
 /// The best weights of the runs in `dirs` (one, or an experiment's
-/// ensemble) on `scenario`, behind the safety shield (its default
-/// assumptions) when `shield`; `None` when the network cannot read that
-/// scenario's observations (transfer across different grids).
+/// ensemble) on `sc`, behind the safety shield with assumptions `shield`
+/// when given; `None` when the network cannot read that scenario's
+/// observations (transfer across different grids).
 fn evaluate_network(
     plan: &Plan,
     dirs: &[PathBuf],
-    scenario: &str,
+    sc: &Arc<Scenario>,
     actions: ActionSet,
-    shield: bool,
+    shield: Option<ShieldParams>,
 ) -> anyhow::Result<Option<Cell>> {
     let best: Vec<PathBuf> = dirs.iter().map(|d| d.join("best")).collect();
     let network = NetworkPolicy::load_members(&best)?;
     let dir = &dirs[0];
-    let sc = load_scenario(scenario)?;
-    if let Err(e) = network.fits(&Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions))) {
-        eprintln!("  {} on {scenario}: skipped, {e:#}", dir.display());
+    if let Err(e) = network.fits(&Env::new(Arc::clone(sc), EnvConfig::for_actions(actions))) {
+        eprintln!("  {} on {}: skipped, {e:#}", dir.display(), sc.name());
         return Ok(None);
     }
-    let (policy, counters): (Box<dyn Policy>, _) = if shield {
-        behind_shield(Box::new(network))
-    } else {
-        (Box::new(network), None)
+    let (policy, counters): (Box<dyn Policy>, _) = match shield {
+        Some(params) => behind_shield(Box::new(network), params),
+        None => (Box::new(network), None),
     };
     let name = dir
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned())
-        + if shield { " + shield" } else { "" };
-    evaluate_policy(plan, &name, &sc, actions, policy.as_ref(), counters).map(Some)
+        + if shield.is_some() { " + shield" } else { "" };
+    evaluate_policy(plan, &name, sc, actions, policy.as_ref(), counters).map(Some)
 }
 
 fn load_scenario(scenario: &str) -> anyhow::Result<Arc<Scenario>> {
@@ -680,10 +708,13 @@ fn load_scenario(scenario: &str) -> anyhow::Result<Arc<Scenario>> {
     ))
 }
 
-/// `policy` behind the safety shield with its default assumptions, and
-/// the shield's counters.
-fn behind_shield(policy: Box<dyn Policy>) -> (Box<dyn Policy>, Option<Arc<ShieldCounters>>) {
-    let shielded = ShieldedPolicy::new(policy, ShieldParams::default());
+/// `policy` behind the safety shield with assumptions `params`, and the
+/// shield's counters.
+fn behind_shield(
+    policy: Box<dyn Policy>,
+    params: ShieldParams,
+) -> (Box<dyn Policy>, Option<Arc<ShieldCounters>>) {
+    let shielded = ShieldedPolicy::new(policy, params);
     let counters = shielded.counters();
     (Box::new(shielded), Some(counters))
 }

@@ -73,7 +73,7 @@ fn trained(r: &Results) -> String {
     }
 }
 
-fn title(s: &str) -> String {
+pub(super) fn title(s: &str) -> String {
     let mut c = s.chars();
     c.next().map_or(String::new(), |f| {
         f.to_uppercase().collect::<String>() + c.as_str()
@@ -294,6 +294,15 @@ fn markdown(plan: &Plan, r: &Results) -> String {
              Each curve is TTC at thresholds 0, 0.25, ... s (collision rate against \
              mean time to cross); the paper's claim is that the DQN points lie beyond \
              the whole curve (faster at the same collision rate).\n"
+        );
+    }
+    if plan.wants(Part::Drivers) {
+        let _ = writeln!(
+            w,
+            "## Safety across drivers
+
+             Every Table I scenario against the drivers' reaction time and the share of              inattentive drivers, for TTC tuned for human drivers, DQN-TTG, DQN-TTG behind              the shield and the shield alone: [drivers/README.md](drivers/README.md).
+"
         );
     }
     shortfalls_md(w, r);
