@@ -651,6 +651,19 @@ impl Env {
         self.traffic.place(&self.scenario, lane, s, v)
     }
 
+    /// Scene construction: [`Env::place_car`] at `(s, v, v_desired)`
+    /// with its own desired speed and driver (`None`: the scenario's
+    /// `[traffic]` driver).
+    pub fn place_driven(
+        &mut self,
+        lane: usize,
+        state: (f64, f64, f64),
+        driver: Option<crate::drivers::Driver>,
+    ) -> Result<(), SimError> {
+        self.traffic
+            .place_driven(&self.scenario, lane, state, driver)
+    }
+
     /// Scene construction: puts the ego's front bumper at arc length `s`
     /// with speed `v`.
     pub fn set_ego(&mut self, s: f64, v: f64, committed: bool) {

@@ -352,6 +352,22 @@ impl Traffic {
         Ok(())
     }
 
+    /// [`Traffic::place`] with a desired speed of its own and a driver
+    /// (`None`: the scenario's `[traffic]` driver).
+    pub fn place_driven(
+        &mut self,
+        scenario: &Scenario,
+        lane: usize,
+        (s, v, v_desired): (f64, f64, f64),
+        driver: Option<Driver>,
+    ) -> Result<(), SimError> {
+        self.place(scenario, lane, s, v)?;
+        let car = self.lanes[lane].back_mut().expect("just placed");
+        car.v_desired = v_desired.max(0.1);
+        car.driver = driver;
+        Ok(())
+    }
+
     fn emit(&mut self, scenario: &Scenario, li: usize, rng: &mut impl rand::Rng) {
         let p = &scenario.spec().traffic;
         let lane = &scenario.lanes()[li];
