@@ -626,6 +626,11 @@ pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<
             rect: ego_rect(sc.ego_path(), ep, s),
         });
     }
+    let start = EgoStep {
+        s: ego.s,
+        v: ego.v,
+        rect: ego_rect(sc.ego_path(), ep, ego.s),
+    };
     let reacts = spec.traffic_reacts;
     cars.iter().find_map(|car| {
         let lane = &sc.lanes()[car.lane];
@@ -638,19 +643,18 @@ pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<
                     (lo.min(x), hi.max(x))
                 })
         };
-        let start = EgoStep {
-            s: ego.s,
-            v: ego.v,
-            rect: ego_rect(sc.ego_path(), ep, ego.s),
-        };
-        let yielder = Yielder::new((start, &drive), z, (dt, ep.length), params, tp);
-        // A phantom stands for every car its stretch may hold, from
-        // standing to its full speed.
-        let speeds: Vec<f64> = if car.phantom {
-            let n = car.v.ceil() as usize;
-            (0..=n).map(|i| (i as f64).min(car.v)).collect()
-        } else {
-            vec![car.v * params.slow_factor, car.v]
+        // The drivers' rule for this car, built only where the band is
+        // crossed. A phantom stands for every car its stretch may hold,
+        // from standing to its full speed.
+        let rule = || {
+            let speeds: Vec<f64> = if car.phantom {
+                let n = car.v.ceil() as usize;
+                (0..=n).map(|i| (i as f64).min(car.v)).collect()
+            } else {
+                vec![car.v * params.slow_factor, car.v]
+            };
+            let yielder = Yielder::new((start, &drive), z, (dt, ep.length), params, tp);
+            (yielder, speeds)
         };
         // The drive-on band first; where it is crossed, a driver on a
         // crossed lane who surely gives way ([`Yielder`]) is safe too.
@@ -757,6 +761,7 @@ pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<
             }
             if follower {
                 let v_max = if car.phantom { car.v } else { v_max };
+                let (yielder, speeds) = rule();
                 if let Some(after_s) = yielder.follower_meets(car.s, &speeds, v_max, &extent) {
                     return Some(Threat {
                         car: *car,
@@ -774,6 +779,7 @@ pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<
             } else {
                 (lane.speed_limit * params.speed_factor).max(car.v)
             };
+            let (yielder, speeds) = rule();
             if yielder.safe(car.s, &speeds, v_max, &extent) {
                 return None;
             }
