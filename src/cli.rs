@@ -621,8 +621,14 @@ pub struct SumoCheckArgs {
     /// position in the list).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Comma-separated driver populations, each a preset (sumo, human) or
+    /// a drivers TOML file; every scenario runs under each, SUMO drawing
+    /// each car's vehicle type from the same bounds (docs/drivers.md gives
+    /// the mapping) [default: sumo,human].
+    #[arg(long)]
+    pub drivers: Option<String>,
     /// A small check (what make test runs): left and challenge, three
-    /// thresholds and never-go, 300 trials.
+    /// thresholds and never-go, 300 trials, under each population.
     #[arg(long)]
     pub quick: bool,
     /// Exit with status 1 when a gated cell drifts (success, collision or

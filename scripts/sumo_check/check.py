@@ -69,7 +69,8 @@ def main():
     print(f"version {traci.getVersion()[1]}", flush=True)
     workdir = args.workdir or tempfile.mkdtemp(prefix="sumo-check-")
     try:
-        built = net.build(export, workdir, netconvert=os.path.join(bin_dir, "netconvert"))
+        built = net.build(export, workdir, netconvert=os.path.join(bin_dir, "netconvert"),
+                          seed=args.seed)
     except net.GeometryError as e:
         sys.exit(f"sumo-check: error: scenario {export['name']}: {e}")
     total = args.trials * len(policies)

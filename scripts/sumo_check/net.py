@@ -20,6 +20,7 @@ is built from it with netconvert, so SUMO's roads are ours:
 
 import math
 import os
+import random
 import subprocess
 from xml.sax.saxutils import quoteattr
 
@@ -63,9 +64,91 @@ def _lane_groups(export, lane_width):
     return groups
 
 
-def build(export, workdir, netconvert="netconvert"):
+# Vehicle types drawn from a population: enough that every part of each
+# bound is driven, few enough for SUMO to load at once.
+DRIVER_TYPES = 64
+# What a traffic car that ignores the ego at the junction adds to its type:
+# it ignores every foe there (the ego is its only one) and still follows an
+# ego that has merged into its lane, as any leader.
+IGNORES_EGO = ' jmIgnoreFoeProb="1" jmIgnoreFoeSpeed="100" jmIgnoreJunctionFoeProb="1"'
+
+
+def traffic_types(export, seed=0):
+    """The traffic's vehicle type `car`: SUMO's passenger car with our
+    parameters and no lane changes, as ours.
+
+    Under a driver population (the export's `drivers`, bounds `[min, max]`
+    or null where every car keeps the `traffic` value) `car` is a
+    vTypeDistribution of DRIVER_TYPES types, each drawn uniformly inside
+    the bounds as our simulator draws a car's driver:
+
+    - reaction `r` -> actionStepLength `r` rounded to the step (at least
+      one): a SUMO driver decides only every actionStepLength seconds, so
+      he answers an ego entering the junction 0 to `r` s late (ours
+      exactly `r` s late);
+    - emergency braking -> emergencyDecel (the hardest SUMO's driver brakes
+      for a foe on the junction), and decel the smaller of `traffic.decel`
+      and it, as ours;
+    - headway `h` -> tau `traffic.tau * h / traffic.headway` (the ratio of
+      the two models' headways the `sumo` drivers have);
+    - the braking a driver accepts to give way has no SUMO counterpart: a
+      car on SUMO's major road does not give way to a car about to leave a
+      stop line, only brakes for one on the junction;
+    - the speed factor bounds are already in `traffic` (normc);
+    - an inattentive share: each drawn type also comes as a copy that
+      ignores the ego at the junction (IGNORES_EGO), drawn that share of
+      the time.
+    """
+    t = export["traffic"]
+    d = export.get("drivers") or {}
+    base = (
+        f'length="{t["length"]}" width="{t["width"]}" accel="{t["accel"]}" '
+        f'sigma="{t["sigma"]}" minGap="{t["min_gap"]}" maxSpeed="70" '
+        f'speedFactor="normc({t["speed_factor_mean"]},{t["speed_factor_dev"]},'
+        f'{t["speed_factor_min"]},{t["speed_factor_max"]})" '
+        f'lcStrategic="-1" lcCooperative="-1" lcSpeedGain="0" lcKeepRight="0"'
+    )
+    reacts = export["traffic_reacts"]
+    drawn = [d.get(k) for k in ("reaction_s", "emergency_decel", "headway")]
+    share = float(d.get("inattentive_share") or 0.0)
+    if all(b is None for b in drawn) and share == 0.0:
+        return (
+            f'  <vType id="car" {base} decel="{t["decel"]}" '
+            f'emergencyDecel="{t["emergency_decel"]}" tau="{t["tau"]}"'
+            + ("" if reacts else IGNORES_EGO) + "/>\n"
+        )
+    rng = random.Random(seed)
+    step = export["step_s"]
+
+    def draw(bound, own):
+        return own if bound is None else rng.uniform(bound[0], bound[1])
+
+    out = ['  <vTypeDistribution id="car">\n']
+    for i in range(DRIVER_TYPES):
+        r = draw(d.get("reaction_s"), t["reaction_delay_s"])
+        emergency = draw(d.get("emergency_decel"), t["emergency_decel"])
+        headway = draw(d.get("headway"), t["headway"])
+        action = max(1, round(r / step)) * step
+        tau = t["tau"] * headway / t["headway"]
+        kind = (
+            f'{base} decel="{min(t["decel"], emergency):.3f}" '
+            f'emergencyDecel="{emergency:.3f}" tau="{tau:.3f}" actionStepLength="{action:.3f}"'
+        )
+        # The same driver attentive and, as often as the share says, not.
+        for suffix, weight, ignores in (("", 1.0 - share, not reacts), ("i", share, True)):
+            if weight > 0.0:
+                out.append(
+                    f'    <vType id="car{i}{suffix}" {kind} probability="{weight / DRIVER_TYPES:.6f}"'
+                    + (IGNORES_EGO if ignores else "") + "/>\n"
+                )
+    out.append("  </vTypeDistribution>\n")
+    return "".join(out)
+
+
+def build(export, workdir, netconvert="netconvert", seed=0):
     """Writes the network and route files into `workdir`; returns a dict
-    with their paths and what the driver needs (edge and lane ids)."""
+    with their paths and what the driver needs (edge and lane ids). `seed`
+    draws the drivers of a population (see `traffic_types`)."""
     os.makedirs(workdir, exist_ok=True)
     lane_width = 3.5
     ego = export["ego"]
@@ -190,21 +273,7 @@ def build(export, workdir, netconvert="netconvert"):
     p = ego["params"]
     with open(routes, "w") as f:
         f.write("<routes>\n")
-        # SUMO's passenger car with our parameters; no lane changes, as ours.
-        f.write(
-            f'  <vType id="car" length="{t["length"]}" width="{t["width"]}" '
-            f'accel="{t["accel"]}" decel="{t["decel"]}" emergencyDecel="{t["emergency_decel"]}" '
-            f'sigma="{t["sigma"]}" tau="{t["tau"]}" minGap="{t["min_gap"]}" maxSpeed="70" '
-            f'speedFactor="normc({t["speed_factor_mean"]},{t["speed_factor_dev"]},'
-            f'{t["speed_factor_min"]},{t["speed_factor_max"]})" '
-            f'lcStrategic="-1" lcCooperative="-1" lcSpeedGain="0" lcKeepRight="0"'
-            # Traffic that does not react to the ego at the junction ignores
-            # every foe there (the ego is its only one); it still follows an
-            # ego that has merged into its lane, as any leader.
-            + ("" if export["traffic_reacts"] else
-               ' jmIgnoreFoeProb="1" jmIgnoreFoeSpeed="100" jmIgnoreJunctionFoeProb="1"')
-            + "/>\n"
-        )
+        f.write(traffic_types(export, seed))
         f.write(
             f'  <vType id="ego" length="{p["length"]}" width="{p["width"]}" '
             f'accel="{p["accel"]}" decel="{p["decel"]}" emergencyDecel="{t["emergency_decel"]}" '

@@ -6,6 +6,7 @@
 
 use serde::Serialize;
 
+use crate::drivers::DriverPopulation;
 use crate::geometry::{OrientedRect, Pose};
 use crate::occlusion::OcclusionLayout;
 use crate::params::{EgoParams, Rewards, TrafficParams};
@@ -27,8 +28,11 @@ pub struct ScenarioExport {
     pub speed_limit: f64,
     /// Whether traffic reacts to the ego.
     pub traffic_reacts: bool,
-    /// Traffic parameters.
+    /// Traffic parameters (the population's speed factor bounds applied).
     pub traffic: TrafficParams,
+    /// Who drives: the bounds each car's driver is drawn from (all unset
+    /// for the `sumo` preset, every car the `traffic` driver).
+    pub drivers: DriverPopulation,
     /// Rewards (for completeness; outcomes do not depend on them).
     pub rewards: Rewards,
     /// The ego.
@@ -217,6 +221,7 @@ impl Scenario {
             speed_limit: spec.speed_limit,
             traffic_reacts: spec.traffic_reacts,
             traffic: spec.drivers.traffic(&spec.traffic),
+            drivers: spec.drivers.clone(),
             rewards: spec.rewards.clone(),
             ego: EgoExport {
                 params: spec.ego.params.clone(),

@@ -1,6 +1,7 @@
 //! `crossroads sumo-check --quick --strict` as `make test` runs it: our
-//! simulator against SUMO on left and challenge (300 trials per cell, the
-//! TTC rule at 1.5, 2 and 3 s, never-go, the empty-road drive). It fails
+//! simulator against SUMO on left and challenge, under `sumo` and `human`
+//! drivers (300 trials per cell, the TTC rule at 1.5, 2 and 3 s, never-go,
+//! the empty-road drive). It fails
 //! when a regime drifts: success, collision or time of a TTC cell outside
 //! the 99 % interval of the difference, or a turn slower or faster than
 //! SUMO's by more than 0.3 s.
@@ -56,11 +57,14 @@ fn quick_sumo_check_finds_no_drift() {
         "sumo-check --quick --strict failed:\n{stdout}\n{stderr}"
     );
     assert!(stdout.contains("0 gated cells drift"), "{stdout}");
-    // The report: both scenarios, their empty-road drives, the figures.
+    // The report: both scenarios under both populations, their empty-road
+    // drives, the figures.
     let readme = std::fs::read_to_string(out.path().join("README.md")).expect("README.md");
     for needle in [
         "## left (ttg actions)",
         "## challenge (ttg actions)",
+        "## left+human (ttg actions)",
+        "## challenge+human (ttg actions)",
         "Empty-road drive",
         "SUMO 1.28",
     ] {
@@ -71,8 +75,10 @@ fn quick_sumo_check_finds_no_drift() {
     )
     .expect("results.json is JSON");
     let scenarios = results["scenarios"].as_array().expect("scenarios");
-    // left, challenge and their empty-road drives.
-    assert_eq!(scenarios.len(), 4, "{scenarios:?}");
+    // left, challenge and their empty-road drives, then both under human
+    // drivers (no empty-road drive: without traffic the drivers do not
+    // matter).
+    assert_eq!(scenarios.len(), 6, "{scenarios:?}");
     for s in scenarios {
         for p in s["policies"].as_array().expect("policies") {
             assert_eq!(p["ours"]["trials"], p["sumo"]["trials"], "{p}");

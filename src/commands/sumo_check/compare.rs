@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use crossroads_sim::{EvalReport, PolicySpec};
 use serde::Serialize;
 
-use super::Pair;
+use super::{Pair, Plan};
 
 const Z95: f64 = 1.959_963_984_540_054;
 const Z99: f64 = 2.575_829_303_548_901;
@@ -84,10 +84,14 @@ impl Cell {
 /// drive is deterministic in both simulators, so no interval applies.
 pub const EMPTY_TOLERANCE_S: f64 = 0.3;
 
-/// Every cell of every pair.
-pub fn cells(pairs: &BTreeMap<String, Vec<Pair>>) -> Vec<Cell> {
+/// Every cell of every pair; TTC cells gated where their plan is.
+pub fn cells(pairs: &BTreeMap<String, Vec<Pair>>, plans: &[Plan]) -> Vec<Cell> {
     let mut out = Vec::new();
     for (scenario, list) in pairs {
+        let plan_gated = plans
+            .iter()
+            .find(|p| &p.scenario == scenario)
+            .is_none_or(|p| p.gated);
         if scenario.ends_with("-empty") {
             for pair in list {
                 let (o, s) = (pair.ours.mean_time_s, pair.sumo.mean_time_s);
@@ -112,7 +116,8 @@ pub fn cells(pairs: &BTreeMap<String, Vec<Pair>>) -> Vec<Cell> {
             continue;
         }
         for pair in list {
-            let gated = matches!(pair.policy, PolicySpec::Ttc(_) | PolicySpec::TtcCreep(_));
+            let gated =
+                plan_gated && matches!(pair.policy, PolicySpec::Ttc(_) | PolicySpec::TtcCreep(_));
             let (o, s) = (&pair.ours, &pair.sumo);
             let mut push = |metric, diff: Option<Diff>, ours, sumo, gate| {
                 out.push(cell(

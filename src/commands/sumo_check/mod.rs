@@ -20,8 +20,8 @@ use std::sync::Arc;
 
 use anyhow::{Context, bail, ensure};
 use crossroads_sim::{
-    ActionSet, EvalConfig, EvalReport, Outcome, PolicySpec, Scenario, TrialResult, evaluate,
-    summarize,
+    ActionSet, DriverPopulation, EvalConfig, EvalReport, Outcome, PolicySpec, Scenario,
+    TrialResult, evaluate, summarize,
 };
 use serde::Deserialize;
 
@@ -47,6 +47,8 @@ pub const QUICK_SCENARIOS: &[&str] = &["left", "challenge"];
 pub const OPEN_THRESHOLDS: &[f64] = &[0.5, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0];
 /// TTC-with-creep thresholds of the full check on the occlusion family, s.
 pub const CREEP_THRESHOLDS: &[f64] = &[2.5, 3.0, 3.25, 3.5, 4.0];
+/// Driver populations of a check unless `--drivers` says otherwise.
+pub const DEFAULT_DRIVERS: &str = "sumo,human";
 /// Thresholds of `--quick`, s.
 pub const QUICK_THRESHOLDS: &[f64] = &[1.5, 2.0, 3.0];
 
@@ -64,6 +66,10 @@ pub struct Plan {
     pub actions: ActionSet,
     /// Policies, TTC ones by ascending threshold first.
     pub policies: Vec<PolicySpec>,
+    /// Whether `--strict` gates its TTC cells: SUMO drives these drivers as
+    /// ours do (the scenario's own). A population SUMO can only approximate
+    /// (a reaction time as its `actionStepLength`) is compared, not gated.
+    pub gated: bool,
 }
 
 /// Trials of every policy of every plan (one simulator's share of a check).
@@ -179,7 +185,7 @@ pub fn run(args: &SumoCheckArgs) -> anyhow::Result<ExitCode> {
         pairs.insert(plan.scenario.clone(), list);
     }
 
-    let cells = compare::cells(&pairs);
+    let cells = compare::cells(&pairs, &plans);
     let meta = report::Meta {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         sumo_version,
@@ -218,11 +224,11 @@ const SCRIPT: &str = "scripts/sumo_check/check.py";
 /// Trials of an empty-road drive (deterministic in both simulators).
 const EMPTY_TRIALS: u64 = 10;
 
-/// The scenarios and policies of this check: for each scenario the TTC
-/// rule over the thresholds (with creep where occluders hide traffic),
-/// random (not with `--quick`) and never-go, and for each open scenario
-/// its empty-road drive (`ttc:0` without traffic: the time the turn
-/// takes).
+/// The scenarios and policies of this check: for each scenario under each
+/// driver population the TTC rule over the thresholds (with creep where
+/// occluders hide traffic), random (not with `--quick`) and never-go, and
+/// for each open scenario its empty-road drive (`ttc:0` without traffic:
+/// the time the turn takes).
 pub fn plans(args: &SumoCheckArgs, trials: u64) -> anyhow::Result<Vec<Plan>> {
     let names: Vec<String> = match &args.scenarios {
         Some(list) => list
@@ -234,60 +240,110 @@ pub fn plans(args: &SumoCheckArgs, trials: u64) -> anyhow::Result<Vec<Plan>> {
         None => FULL_SCENARIOS.iter().map(|s| (*s).to_owned()).collect(),
     };
     ensure!(!names.is_empty(), "--scenarios is empty");
-    let mut plans = Vec::with_capacity(names.len());
-    for name in names {
-        let scenario = Scenario::load(&name).with_context(|| format!("scenario {name:?}"))?;
-        let spec = scenario.spec();
-        let occluded = spec.occlusion.is_some() || !spec.obstacles.is_empty();
-        let actions = if occluded {
-            ActionSet::Creep
-        } else {
-            ActionSet::Ttg
-        };
-        let thresholds: Vec<f64> = match &args.thresholds {
-            Some(t) => super::tune_ttc::parse_thresholds(t).context("--thresholds")?,
-            None if args.quick => QUICK_THRESHOLDS.to_vec(),
-            None if occluded => CREEP_THRESHOLDS.to_vec(),
-            None => OPEN_THRESHOLDS.to_vec(),
-        };
-        let mut policies: Vec<PolicySpec> = thresholds
-            .iter()
-            .map(|&t| {
-                if occluded {
-                    PolicySpec::TtcCreep(t)
-                } else {
-                    PolicySpec::Ttc(t)
+    let populations = populations(args.drivers.as_deref())?;
+    let mut plans = Vec::with_capacity(names.len() * populations.len());
+    for (label, drivers) in &populations {
+        for name in &names {
+            let base = Scenario::load(name).with_context(|| format!("scenario {name:?}"))?;
+            let scenario = match label {
+                None => base,
+                Some(label) => {
+                    let mut spec = base.spec().clone();
+                    spec.name = format!("{}+{label}", spec.name);
+                    spec.drivers = drivers.clone();
+                    Scenario::compile(spec)?
                 }
-            })
-            .collect();
-        if !args.quick {
-            policies.push(PolicySpec::Random);
+            };
+            plans.extend(plans_of(args, Arc::new(scenario), label.is_none(), trials)?);
         }
-        policies.push(PolicySpec::Never);
-        if !occluded {
-            let mut empty = spec.clone();
-            empty.name = format!("{}-empty", spec.name);
-            empty.emission_per_s = 0.0;
-            empty
-                .lanes
-                .iter_mut()
-                .for_each(|l| l.emission_per_s = Some(0.0));
-            plans.push(Plan {
-                scenario: empty.name.clone(),
-                compiled: Arc::new(Scenario::compile(empty)?),
-                trials: EMPTY_TRIALS.min(trials),
-                actions,
-                policies: vec![PolicySpec::Ttc(0.0)],
-            });
-        }
+    }
+    Ok(plans)
+}
+
+/// `--drivers` as (label, population): no label for `sumo` (the scenario's
+/// own drivers, its plans named as the scenario), else the preset's name or
+/// the file's stem.
+fn populations(list: Option<&str>) -> anyhow::Result<Vec<(Option<String>, DriverPopulation)>> {
+    let list = list.unwrap_or(DEFAULT_DRIVERS);
+    let mut out: Vec<(Option<String>, DriverPopulation)> = Vec::new();
+    for item in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let population = DriverPopulation::load(item).context("--drivers")?;
+        let label = (item != "sumo").then(|| {
+            Path::new(item)
+                .file_stem()
+                .map_or(item.to_owned(), |s| s.to_string_lossy().into_owned())
+        });
+        ensure!(
+            out.iter().all(|(l, _)| *l != label),
+            "--drivers names {item:?} twice"
+        );
+        out.push((label, population));
+    }
+    ensure!(!out.is_empty(), "--drivers is empty");
+    Ok(out)
+}
+
+/// One scenario's plans under one population: its TTC thresholds, random
+/// and never-go, and (for the scenario's own drivers) the empty-road drive.
+fn plans_of(
+    args: &SumoCheckArgs,
+    scenario: Arc<Scenario>,
+    own_drivers: bool,
+    trials: u64,
+) -> anyhow::Result<Vec<Plan>> {
+    let mut plans = Vec::new();
+    let spec = scenario.spec();
+    let occluded = spec.occlusion.is_some() || !spec.obstacles.is_empty();
+    let actions = if occluded {
+        ActionSet::Creep
+    } else {
+        ActionSet::Ttg
+    };
+    let thresholds: Vec<f64> = match &args.thresholds {
+        Some(t) => super::tune_ttc::parse_thresholds(t).context("--thresholds")?,
+        None if args.quick => QUICK_THRESHOLDS.to_vec(),
+        None if occluded => CREEP_THRESHOLDS.to_vec(),
+        None => OPEN_THRESHOLDS.to_vec(),
+    };
+    let mut policies: Vec<PolicySpec> = thresholds
+        .iter()
+        .map(|&t| {
+            if occluded {
+                PolicySpec::TtcCreep(t)
+            } else {
+                PolicySpec::Ttc(t)
+            }
+        })
+        .collect();
+    if !args.quick {
+        policies.push(PolicySpec::Random);
+    }
+    policies.push(PolicySpec::Never);
+    if !occluded && own_drivers {
+        let mut empty = spec.clone();
+        empty.name = format!("{}-empty", spec.name);
+        empty.emission_per_s = 0.0;
+        empty
+            .lanes
+            .iter_mut()
+            .for_each(|l| l.emission_per_s = Some(0.0));
         plans.push(Plan {
-            scenario: scenario.name().to_owned(),
-            compiled: Arc::new(scenario),
-            trials,
+            scenario: empty.name.clone(),
+            compiled: Arc::new(Scenario::compile(empty)?),
+            trials: EMPTY_TRIALS.min(trials),
             actions,
-            policies,
+            policies: vec![PolicySpec::Ttc(0.0)],
+            gated: true,
         });
     }
+    plans.push(Plan {
+        scenario: scenario.name().to_owned(),
+        compiled: scenario,
+        trials,
+        actions,
+        policies,
+        gated: own_drivers,
+    });
     Ok(plans)
 }
 

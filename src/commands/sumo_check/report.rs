@@ -223,11 +223,35 @@ fn readme(
             "\nSUMO's collisions against an overlap test of SUMO's own \
              positions (our footprints): {disagree} trials disagree.\n"
         );
+        if !plan.gated {
+            let _ = writeln!(
+                s,
+                "Compared, not gated: SUMO has no reaction time of its own and \
+                 stands in for these drivers' with its `actionStepLength` \
+                 ([docs/drivers.md](../../docs/drivers.md#sumo-agrees)).\n"
+            );
+        }
     }
     let drifts: Vec<&Cell> = cells
         .iter()
         .filter(|c| c.gated && c.verdict == Verdict::Drifts)
         .collect();
+    let approximated: Vec<&Cell> = cells
+        .iter()
+        .filter(|c| {
+            !c.gated
+                && c.verdict == Verdict::Drifts
+                && c.policy.starts_with("ttc")
+                && ["success", "collision", "time_s"].contains(&c.metric)
+        })
+        .collect();
+    if !approximated.is_empty() {
+        let _ = writeln!(s, "## Drifts under drivers SUMO approximates (not gated)\n");
+        for c in approximated {
+            let _ = writeln!(s, "- {}", c.describe());
+        }
+        s.push('\n');
+    }
     let _ = writeln!(s, "## Gated drifts\n");
     if drifts.is_empty() {
         let _ = writeln!(
