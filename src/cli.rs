@@ -518,10 +518,11 @@ pub struct PolicyArgs {
     /// actions). Optionally override its assumptions, e.g.
     /// `--shield margin_s=0.3,phantom_factor=1.1` (keys: speed_factor,
     /// phantom_factor, slow_factor, margin_s, gap_m, follower_decel,
-    /// reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel;
-    /// `yield_decel=4.5` counts on comfortable braking only), or take a
-    /// driver population's worst bounds with `assume=human` (a preset or a
-    /// drivers file; the defaults assume SUMO's drivers).
+    /// reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel,
+    /// range_m; `yield_decel=4.5` counts on comfortable braking only;
+    /// `range_m=150` senses each lane whole, as the TTC rule does), or take
+    /// a driver population's worst bounds with `assume=human` (a preset or
+    /// a drivers file; the defaults assume SUMO's drivers).
     #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]
     pub shield: Option<String>,
     /// Number format of a network policy's trunk: f32 (the same result on

@@ -11,7 +11,8 @@
 //! cars of the observation: a car is sensed when its centre lies on the
 //! TTG grid (104 m either side of the junction) in a cell the sensor sees,
 //! with its lane, position and speed (what the grid's occupancy, offset,
-//! heading and speed channels hold). It never reads a car the observation
+//! heading and speed channels hold); `range_m` states a longer-range
+//! sensor instead. It never reads a car the observation
 //! leaves out, a driver's desired speed, or the random stream, and it never
 //! forks the simulator.
 //!
@@ -144,6 +145,12 @@ pub struct ShieldParams {
     /// on (he may already have his foot over the brake: no `reaction_s`
     /// on this side).
     pub hard_decel: f64,
+    /// How far the ego's sensors reach, m from the junction's centre:
+    /// `None` (the default) is the TTG grid's extent (104 m either side),
+    /// what the networks observe; a longer range (automotive radar reaches
+    /// 150-250 m) senses cars the grid leaves out and moves each lane's
+    /// phantom out with it, up to the lane's start.
+    pub range_m: Option<f64>,
 }
 
 impl Default for ShieldParams {
@@ -160,6 +167,7 @@ impl Default for ShieldParams {
             fall_in_decel: 9.0,
             clear_s: 0.5,
             hard_decel: 9.0,
+            range_m: None,
         }
     }
 }
@@ -222,6 +230,10 @@ impl ShieldParams {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(err(format!("{key} must be finite and not negative")));
             }
+            if key.trim() == "range_m" {
+                p.range_m = Some(v);
+                continue;
+            }
             let field = match key.trim() {
                 "speed_factor" => &mut p.speed_factor,
                 "phantom_factor" => &mut p.phantom_factor,
@@ -238,7 +250,7 @@ impl ShieldParams {
                     return Err(err(format!(
                         "unknown key {other:?}; known: assume, speed_factor, phantom_factor, \
                          slow_factor, margin_s, gap_m, follower_decel, reaction_s, yield_decel, \
-                         fall_in_decel, clear_s, hard_decel"
+                         fall_in_decel, clear_s, hard_decel, range_m"
                     )));
                 }
             };
@@ -248,9 +260,10 @@ impl ShieldParams {
             || p.phantom_factor <= 0.0
             || p.slow_factor > 1.0
             || p.follower_decel <= 0.0
+            || p.range_m.is_some_and(|r| r <= 0.0)
         {
             return Err(err(
-                "speed_factor, phantom_factor and follower_decel must be positive, \
+                "speed_factor, phantom_factor, follower_decel and range_m must be positive, \
                  slow_factor at most 1"
                     .into(),
             ));
@@ -307,9 +320,11 @@ pub struct Threat {
 }
 
 /// The sensor model: the cars of `env`'s TTG-grid observation (centre on
-/// the grid, in a cell the sensor sees) on lanes that meet the ego's
-/// route, then one phantom per such lane where the view upstream of the
-/// ego's path ends. Appends to `out` (cleared first).
+/// the grid, in a cell the sensor sees; with `range_m`, within that range
+/// of the junction's centre and in the sensor's line of sight) on lanes
+/// that meet the ego's route, then one phantom per such lane where the
+/// view upstream of the ego's path ends. Appends to `out` (cleared
+/// first).
 pub fn sense(env: &Env, params: &ShieldParams, out: &mut Vec<SensedCar>) {
     out.clear();
     let sc = env.scenario();
@@ -318,9 +333,14 @@ pub fn sense(env: &Env, params: &ShieldParams, out: &mut Vec<SensedCar>) {
     let occluded = !env.occluders().is_empty();
     // Visibility of the cells looked at so far (0 unknown, 1 seen, 2 hidden).
     let mut seen = [0u8; crate::observation::TTG_ROWS * crate::observation::TTG_COLS];
-    let mut visible = |p| -> bool {
-        let Some((r, c)) = grid.cell(p) else {
+    let mut visible = |p: crate::geometry::Vec2| -> bool {
+        if params.range_m.is_some_and(|range| p.x.hypot(p.y) > range) {
             return false;
+        }
+        let Some((r, c)) = grid.cell(p) else {
+            // Off the grid: seen only by a longer-range sensor, where
+            // nothing hides it.
+            return params.range_m.is_some() && (!occluded || env.is_visible(p));
         };
         if !occluded {
             return true;
@@ -886,6 +906,41 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_longer_range_senses_cars_past_the_grid_and_moves_the_phantom_to_the_lane_start() {
+        let mut env = empty("left");
+        let near = lane_in(&env, 0);
+        // 120 m short of the ego's path: past the grid's 104 m.
+        env.place_car(0, near - 120.0, 20.0).unwrap();
+        let sensed = |spec: &str| {
+            let p = ShieldParams::parse(spec).expect("parses");
+            let mut cars = Vec::new();
+            sense(&env, &p, &mut cars);
+            cars
+        };
+        let grid = sensed("default");
+        assert!(grid.iter().all(|c| c.phantom), "{grid:?}");
+        let far = sensed("range_m=200");
+        assert!(
+            far.iter().any(|c| !c.phantom && c.lane == 0),
+            "a 200 m sensor sees the car: {far:?}"
+        );
+        // The whole of each lane is seen: every phantom stands at its
+        // lane's start (where cars appear).
+        for c in far.iter().filter(|c| c.phantom) {
+            assert!(c.s < 3.0, "{c:?}");
+        }
+        // A shorter range than the grid sees less.
+        let short = sensed("range_m=50");
+        assert!(short.iter().all(|c| c.phantom));
+        let lanes = env.scenario().lanes();
+        for c in &short {
+            let centre = lanes[c.lane].path.pose_at(c.s - 2.5).pos;
+            assert!((centre.x.abs() - 50.0).abs() < 1.5, "{centre:?}");
+        }
+        assert!(ShieldParams::parse("range_m=0").is_err());
     }
 
     #[test]

@@ -25,6 +25,13 @@ use crate::experiments;
 use crate::plot::{self, Panel, Series};
 use crate::progress;
 
+/// How far the shield's sensor reaches here, m: every built-in lane starts
+/// 150 m from the junction's centre, so it sees each lane whole, as the
+/// TTC rule does. With the grid's 104 m, a car just past it at the fastest
+/// `human` speed leaves no gap on Left, Left2 and Challenge
+/// (reports/drivers).
+const SENSOR_RANGE_M: f64 = 150.0;
+
 /// Drivers' reaction times swept, s: SUMO's 0.2 to the `human` preset's
 /// slowest (1.5), and one past it.
 pub const REACTIONS: [f64; 6] = [0.2, 0.5, 0.8, 1.1, 1.5, 2.0];
@@ -120,7 +127,11 @@ pub fn evaluate(
         Ok(())
     };
     let human = DriverPopulation::human();
-    let assume = ShieldParams::default().assuming(&human);
+    let assume = ShieldParams {
+        range_m: Some(SENSOR_RANGE_M),
+        ..ShieldParams::default()
+    }
+    .assuming(&human);
     let mut r = DriversResults {
         trials: plan.trials,
         seed: plan.seed,
@@ -320,8 +331,9 @@ fn markdown(r: &DriversResults) -> String {
          `human` drivers by the paper's rule (the lowest with no collision on the same \
          trials); the shield, alone (`ttc:0` behind it) or behind DQN-TTG (each \
          scenario's `ttg-<scenario>` run, trained on `sumo` drivers), assumes the \
-         `human` bounds (`--shield assume=human`): a reaction of 2.0 s and any \
-         inattentive driver lie outside what it assumes. A cell is collision % · \
+         `human` bounds and sees each lane whole, as the TTC rule does (`--shield \
+         assume=human,range_m=150`): a reaction of 2.0 s and any inattentive driver \
+         lie outside what it assumes. A cell is collision % · \
          success % · mean time of the successful trials, s. See docs/drivers.md for \
          what the presets are and what \"zero collisions\" means.\n",
         r.started, r.machine, r.trials, r.seed
