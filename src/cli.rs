@@ -519,7 +519,8 @@ pub struct PolicyArgs {
     /// `--shield margin_s=0.3,phantom_factor=1.1` (keys: speed_factor,
     /// phantom_factor, slow_factor, margin_s, gap_m, follower_decel,
     /// reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel,
-    /// range_m; `yield_decel=4.5` counts on comfortable braking only;
+    /// range_m, leader_decel; `yield_decel=4.5` counts on comfortable
+    /// braking only;
     /// `range_m=150` senses each lane whole, as the TTC rule does), or take
     /// a driver population's worst bounds with `assume=human` (a preset or
     /// a drivers file; the defaults assume SUMO's drivers).

@@ -824,6 +824,83 @@ fn a_shield_assuming_human_drivers_lets_none_of_them_hit_the_ego() {
     }
 }
 
+/// Two trials that collided behind the shield assuming `human` drivers
+/// before it allowed for a car braking for a slower car ahead of it
+/// (`leader_decel`, 4.5 m/s² under that assumption), found by 100,000
+/// trials at corners of the bounds (reports/drivers): on `occluded-60`,
+/// speed factors spread with sd 0.3, the car ahead of the merging ego
+/// slowed with its platoon; on Challenge, every driver reacting in 1.5 s,
+/// a driver slowing gently behind another judged he would arrive after
+/// the ego and drove on into it. Each still collides without the
+/// allowance, and does not with it.
+#[test]
+fn a_car_braking_for_its_own_leader_is_allowed_for() {
+    use crossroads_sim::{
+        ActionSet, Bounds, DriverPopulation, Env, EnvConfig, Outcome, PolicyRng, Scenario,
+        ShieldParams, ShieldedPolicy, episode_seed, parse_policy, policy_seed,
+    };
+    use rand::SeedableRng;
+    use std::sync::Arc;
+    let human = DriverPopulation::human();
+    let fastest = DriverPopulation {
+        speed_factor_dev: Some(0.3),
+        ..human.clone()
+    };
+    let slowest = DriverPopulation {
+        reaction_s: Some(Bounds::exactly(1.5)),
+        ..human.clone()
+    };
+    let cases = [
+        (
+            "occluded-60",
+            fastest,
+            4187,
+            "ttc-creep:0",
+            ActionSet::Creep,
+            None,
+        ),
+        (
+            "challenge",
+            slowest,
+            25131,
+            "ttc:0",
+            ActionSet::Ttg,
+            Some(150.0),
+        ),
+    ];
+    for (name, drivers, trial, inner, actions, range_m) in cases {
+        let sc = Arc::new(Scenario::load(name).unwrap().with_drivers(drivers).unwrap());
+        let outcome = |leader_decel: Option<f64>| {
+            let mut params = ShieldParams {
+                range_m,
+                ..ShieldParams::default()
+            }
+            .assuming(&human);
+            if let Some(b) = leader_decel {
+                params.leader_decel = b;
+            }
+            let policy = ShieldedPolicy::new(parse_policy(inner).unwrap(), params);
+            let mut env = Env::new(Arc::clone(&sc), EnvConfig::for_actions(actions));
+            env.reset(episode_seed(5, trial));
+            let mut rngs = vec![PolicyRng::seed_from_u64(policy_seed(5, trial))];
+            let mut act = [0usize];
+            while !env.is_done() {
+                policy
+                    .act(std::slice::from_ref(&env), &mut rngs, &mut act)
+                    .unwrap();
+                env.step(act[0]).unwrap();
+            }
+            env.outcome().unwrap()
+        };
+        assert_eq!(
+            outcome(Some(0.0)),
+            Outcome::Collision,
+            "{name} trial {trial}"
+        );
+        assert_ne!(outcome(None), Outcome::Collision, "{name} trial {trial}");
+    }
+}
+
 /// Replacing a population replaces it whole: a scenario whose `[drivers]`
 /// spread desired speeds, given the `sumo` preset, draws them as the
 /// scenario's `[traffic]` says again.
