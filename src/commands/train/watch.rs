@@ -59,7 +59,17 @@ impl Session {
             self.metrics
                 .progress(self.updates, self.env_steps, steps_per_s);
             bar.set_position(self.updates);
-            bar.set_message(format!("{:.0} env steps/s | {last_eval}", steps_per_s));
+            // Once the target is confirmed (on `confirm_trials` trials),
+            // the bar says so first, with when.
+            let target = self.summary.reached.as_ref().map_or(String::new(), |r| {
+                format!(
+                    "target confirmed at {:.1} min | ",
+                    r.evaluation.wall_seconds / 60.0
+                )
+            });
+            bar.set_message(format!(
+                "{target}{steps_per_s:.0} env steps/s | {last_eval}"
+            ));
             if self.updates >= next_eval && Instant::now() >= eval_gate {
                 next_eval = self.updates + c.train.eval_every;
                 let began = Instant::now();
