@@ -5,6 +5,9 @@ use std::path::Path;
 use std::sync::Once;
 
 use anyhow::{Context, anyhow};
+use plotters::coord::cartesian::Cartesian2d;
+use plotters::coord::ranged1d::{Ranged, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
@@ -41,7 +44,14 @@ pub struct Panel {
     pub y_label: String,
     /// The series drawn.
     pub series: Vec<Series>,
+    /// A logarithmic y axis from [`LOG_FLOOR`] up (values at or below the
+    /// floor, zeros included, drawn on it), for rates that matter at
+    /// 0.01 % and at 50 %.
+    pub log_y: bool,
 }
+
+/// Bottom of a logarithmic y axis, where zeros are drawn.
+pub const LOG_FLOOR: f64 = 0.001;
 
 /// A scatter/line chart written to `path` as PNG (800 x 560).
 pub fn chart(
@@ -56,6 +66,7 @@ pub fn chart(
         x_label: x_label.to_owned(),
         y_label: y_label.to_owned(),
         series: series.to_vec(),
+        log_y: false,
     };
     grid(path, None, 1, std::slice::from_ref(&panel))
 }
@@ -112,16 +123,40 @@ fn draw_panel(
         (lo - 0.05 * span, hi + 0.05 * span)
     };
     let (x0, x1) = pad(x0, x1);
-    let (y0, y1) = pad(y0.min(0.0), y1);
-
     let draw = |e: &dyn std::fmt::Display| anyhow!("{e}");
-    let mut chart = ChartBuilder::on(area)
+    let mut builder = ChartBuilder::on(area);
+    builder
         .caption(&panel.title, (FONT, 22))
         .margin(16)
         .x_label_area_size(44)
-        .y_label_area_size(64)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(|e| draw(&e))?;
+        .y_label_area_size(64);
+    if panel.log_y {
+        let top = 10f64.powf(y1.max(LOG_FLOOR).log10().ceil().max(-2.0));
+        let chart = builder
+            .build_cartesian_2d(x0..x1, (LOG_FLOOR..top).log_scale())
+            .map_err(|e| draw(&e))?;
+        fill(chart, panel, Some(LOG_FLOOR))
+    } else {
+        let (y0, y1) = pad(y0.min(0.0), y1);
+        let chart = builder
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| draw(&e))?;
+        fill(chart, panel, None)
+    }
+}
+
+/// Draws `panel`'s mesh, series and legend on a built chart; with `floor`
+/// (a logarithmic axis) values below it are drawn on it.
+fn fill<'a, Y>(
+    mut chart: ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
+    panel: &Panel,
+    floor: Option<f64>,
+) -> anyhow::Result<()>
+where
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let draw = |e: &dyn std::fmt::Display| anyhow!("{e}");
+    let series = &panel.series;
     chart
         .configure_mesh()
         .x_desc(&panel.x_label)
@@ -136,6 +171,7 @@ fn draw_panel(
             .iter()
             .copied()
             .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .map(|(x, y)| (x, floor.map_or(y, |f| y.max(f))))
             .collect();
         if s.line {
             chart
@@ -156,4 +192,47 @@ fn draw_panel(
         .draw()
         .map_err(|e| draw(&e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A PNG's width and height, from its header.
+    fn size(path: &Path) -> (u32, u32) {
+        let b = std::fs::read(path).expect("the PNG");
+        let word = |i: usize| u32::from_be_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        (word(16), word(20))
+    }
+
+    #[test]
+    fn a_log_panel_draws_rates_from_zero_to_half_beside_a_linear_one() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let rates = Series {
+            label: "collision".to_owned(),
+            points: vec![(0.0, 50.0), (1.0, 0.5), (2.0, 0.01), (3.0, 0.0)],
+            line: true,
+        };
+        let panel = |log_y| Panel {
+            title: "rates".to_owned(),
+            x_label: "minutes".to_owned(),
+            y_label: "%".to_owned(),
+            series: vec![rates.clone()],
+            log_y,
+        };
+        let path = dir.path().join("two.png");
+        grid(&path, None, 2, &[panel(false), panel(true)]).expect("drawn");
+        assert_eq!(size(&path), (1600, 560));
+        // Nothing but zeros: drawn on the floor, not refused.
+        let zeros = Panel {
+            series: vec![Series {
+                points: vec![(0.0, 0.0), (1.0, 0.0)],
+                ..rates.clone()
+            }],
+            ..panel(true)
+        };
+        let path = dir.path().join("zeros.png");
+        grid(&path, None, 1, &[zeros]).expect("drawn");
+        assert_eq!(size(&path), (800, 560));
+    }
 }

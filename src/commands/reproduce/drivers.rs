@@ -414,6 +414,7 @@ fn figure(path: &Path, r: &DriversResults, axis: Axis) -> anyhow::Result<()> {
                 x_label: x_label.to_owned(),
                 y_label: "collisions, % of trials".to_owned(),
                 series,
+                log_y: false,
             }
         })
         .collect();

@@ -725,6 +725,7 @@ fn fig3(path: &Path, r: &Results) -> anyhow::Result<()> {
                 x_label: "mean time to cross (s)".into(),
                 y_label: "collision rate (%)".into(),
                 series,
+                log_y: false,
             });
         }
     }

@@ -346,12 +346,14 @@ fn figures(out: &Path, plans: &[Plan], pairs: &BTreeMap<String, Vec<Pair>>) -> a
             x_label: "mean time to cross (s)".to_owned(),
             y_label: "collision rate (%)".to_owned(),
             series: series(&|_, r| r.mean_time_s.map(|t| (t, 100.0 * r.collision_rate))).to_vec(),
+            log_y: false,
         });
         success.push(Panel {
             title: format!("{}: {rule}", plan.scenario),
             x_label: "threshold (s)".to_owned(),
             y_label: "success (%)".to_owned(),
             series: series(&|t, r| Some((t, 100.0 * r.success_rate))).to_vec(),
+            log_y: false,
         });
     }
     let cols = plans.len().min(4);

@@ -263,10 +263,25 @@ pub fn read_curve(path: &Path) -> anyhow::Result<Vec<Evaluation>> {
     Ok(out)
 }
 
-/// `curve.png`: greedy success and collision rates (%) against
-/// wall-clock minutes.
+/// `curve.png`: greedy success, collision and timeout rates (%) against
+/// wall-clock minutes, and beside them the collision rate on a
+/// logarithmic axis, where 0.01-1 % can be read (0 drawn at its floor).
 pub fn plot_curve(path: &Path, title: &str, rows: &[Evaluation]) -> anyhow::Result<()> {
-    grid(path, None, 1, &[curve_panel(title, rows)])
+    let collisions = Panel {
+        title: "collisions (log scale; 0 % drawn at the bottom)".to_owned(),
+        x_label: "wall-clock minutes".to_owned(),
+        y_label: "% of greedy evaluation trials".to_owned(),
+        series: vec![Series {
+            label: "collision".to_owned(),
+            points: rows
+                .iter()
+                .map(|e| (e.wall_seconds / 60.0, 100.0 * e.collision_rate))
+                .collect(),
+            line: true,
+        }],
+        log_y: true,
+    };
+    grid(path, None, 2, &[curve_panel(title, rows), collisions])
 }
 
 /// The learning curve of `rows` as one panel: greedy success, collision
@@ -291,6 +306,7 @@ pub fn curve_panel(title: &str, rows: &[Evaluation]) -> Panel {
             series("success", &|e| e.success_rate),
             series("timeout", &|e| e.timeout_rate),
         ],
+        log_y: false,
     }
 }
 
