@@ -45,6 +45,15 @@ pub enum SimError {
         /// What is wrong.
         problem: String,
     },
+    /// The shield's assumptions (`--shield key=value,...`) could not be
+    /// parsed.
+    #[error("invalid shield assumptions {spec:?}: {problem}")]
+    ShieldSpec {
+        /// The string given.
+        spec: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// An action index is outside the action set.
     #[error("action {action} is out of range for the {set} action set ({count} actions)")]
     ActionOutOfRange {

@@ -229,7 +229,7 @@ impl ShieldParams {
     /// driver preset or file) first sets them by [`ShieldParams::assuming`]
     /// that population.
     pub fn parse(spec: &str) -> Result<Self, SimError> {
-        let err = |problem: String| SimError::PolicySpec {
+        let err = |problem: String| SimError::ShieldSpec {
             spec: spec.to_owned(),
             problem,
         };
