@@ -86,6 +86,17 @@ pub struct LearnerConfig {
     pub target_update: TargetUpdate,
     /// Updates between hard target copies. At least 1.
     pub target_period: u64,
+    /// Updates of an early phase with its own learning rate and target
+    /// period (`early_learning_rate`, `early_target_period`): bold steps
+    /// while the network learns the most, the main settings after. 0 (the
+    /// default) has no early phase.
+    pub early_updates: u64,
+    /// Learning rate of the first `early_updates` updates; unset keeps
+    /// `learning_rate`. Above 0.
+    pub early_learning_rate: Option<f64>,
+    /// Target period of the first `early_updates` updates; unset keeps
+    /// `target_period`. At least 1.
+    pub early_target_period: Option<u64>,
     /// Soft update fraction per update. In (0, 1].
     pub target_tau: f64,
     /// Importance-sampling exponent at the start of the run (Ape-X: 0.4).
@@ -158,6 +169,9 @@ impl Default for LearnerConfig {
             target_update: TargetUpdate::Period,
             target_period: 2_500,
             target_tau: 0.005,
+            early_updates: 0,
+            early_learning_rate: None,
+            early_target_period: None,
             importance_beta: 0.4,
             importance_beta_final: 1.0,
             importance_beta_updates: 0,
@@ -226,6 +240,20 @@ impl LearnerConfig {
                 self.max_grad_norm
             ),
         );
+        if let Some(lr) = self.early_learning_rate {
+            problems.check(
+                positive(lr),
+                "early_learning_rate",
+                format!("must be finite and above 0, got {lr}"),
+            );
+        }
+        if let Some(period) = self.early_target_period {
+            problems.check(
+                period >= 1,
+                "early_target_period",
+                format!("must be at least 1, got {period}"),
+            );
+        }
         problems.check(
             self.target_period >= 1,
             "target_period",

@@ -90,7 +90,7 @@ pub use actor::{ActorConfig, ActorTransport};
 pub use crossroads_types::TrunkKind;
 pub use learner::{LearnerConfig, OptimizerKind, TargetUpdate};
 pub use replay::{ReplayConfig, WeightNormalization};
-pub use runtime::{PrecisionSetting, RuntimeConfig};
+pub use runtime::{DeviceSetting, PrecisionSetting, RuntimeConfig};
 pub use sim::SimConfig;
 pub use telemetry::{LogFormat, TelemetryConfig};
 pub use train::TrainConfig;

@@ -48,9 +48,19 @@ pub struct ReplayConfig {
     /// Target samples per inserted item (the learner neither overfits a
     /// small buffer nor falls behind); 0 turns the ratio off.
     pub samples_per_insert: f64,
+    /// Samples per insert at the start of the run, moving linearly to
+    /// `samples_per_insert` over `ratio_ramp`: fresh experience while the
+    /// network learns the most, more reuse of it later. Unset keeps
+    /// `samples_per_insert` throughout. Above 0; needs `samples_per_insert`
+    /// above 0.
+    pub early_samples_per_insert: Option<f64>,
+    /// Items sampled (learner updates x `learner.batch_size`) when the
+    /// ratio leaves `early_samples_per_insert` and when it reaches
+    /// `samples_per_insert`: `[from, to]`, from at most to.
+    pub ratio_ramp: [u64; 2],
     /// How far, in samples, the ratio may drift either way before inserts
-    /// or samples wait. At least max(1, samples_per_insert) when the ratio
-    /// is on.
+    /// or samples wait. At least max(1, samples_per_insert,
+    /// early_samples_per_insert) when the ratio is on.
     pub rate_tolerance: f64,
     /// Longest an insert waits for the rate limiter, milliseconds.
     pub insert_timeout_ms: u64,
@@ -102,6 +112,8 @@ impl Default for ReplayConfig {
             weight_normalization: WeightNormalization::Table,
             min_size_to_sample: 1_000,
             samples_per_insert: 0.0,
+            early_samples_per_insert: None,
+            ratio_ramp: [0, 0],
             rate_tolerance: 1_000.0,
             insert_timeout_ms: 30_000,
             sample_timeout_ms: 10_000,
@@ -145,13 +157,34 @@ impl ReplayConfig {
                 self.samples_per_insert
             ),
         );
-        let min_tolerance = self.samples_per_insert.max(1.0);
+        if let Some(early) = self.early_samples_per_insert {
+            problems.check(
+                early > 0.0 && early.is_finite(),
+                "early_samples_per_insert",
+                format!("must be finite and above 0, got {early}"),
+            );
+            problems.check(
+                self.samples_per_insert > 0.0,
+                "early_samples_per_insert",
+                "needs replay.samples_per_insert above 0 (the ratio it moves to)".to_owned(),
+            );
+        }
+        problems.check(
+            self.ratio_ramp[0] <= self.ratio_ramp[1],
+            "ratio_ramp",
+            format!(
+                "must be [from, to] with from at most to, got {:?}",
+                self.ratio_ramp
+            ),
+        );
+        let early = self.early_samples_per_insert.unwrap_or(0.0);
+        let min_tolerance = self.samples_per_insert.max(early).max(1.0);
         problems.check(
             self.samples_per_insert == 0.0
                 || (self.rate_tolerance >= min_tolerance && self.rate_tolerance.is_finite()),
             "rate_tolerance",
             format!(
-                "must be at least max(1, replay.samples_per_insert) = {min_tolerance}, got {}",
+                "must be at least max(1, replay.samples_per_insert, replay.early_samples_per_insert) = {min_tolerance}, got {}",
                 self.rate_tolerance
             ),
         );

@@ -1,10 +1,12 @@
-//! `[runtime]`: the process's threads and number format.
+//! `[runtime]`: the process's threads, number format and the learner's
+//! device.
 
 use serde::{Deserialize, Serialize};
 
 use super::Checks;
 
-/// Threads of the process and the number format of its networks.
+/// Threads of the process, the number format of its networks and the
+/// device of the learner's.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RuntimeConfig {
@@ -36,7 +38,18 @@ pub struct RuntimeConfig {
     /// everything else in fp32; `f32` always; `bf16` asks for it on any
     /// CPU (slow without hardware bf16). `eval` and `reproduce` run fp32
     /// unless told otherwise, so a cell does not depend on the machine.
+    /// On a CUDA learner (`device`) `auto` is fp32; `bf16` still asks
+    /// for it there.
     pub precision: PrecisionSetting,
+    /// Where the learner keeps its networks, batches, target network and
+    /// optimizer state: `auto` (the default) is CUDA device 0 when
+    /// libtorch was built with CUDA and a GPU is visible, else the CPU;
+    /// `cpu`; `cuda` is CUDA device 0, and the learner stops at start,
+    /// naming what is missing, when there is none. Only the learner uses
+    /// it: actors, `eval` and `doctor`'s forward passes run on the CPU.
+    /// `crossroads doctor` prints what it resolves to; building against
+    /// a CUDA libtorch: docs/performance.md, "A GPU learner".
+    pub device: DeviceSetting,
 }
 
 /// `runtime.precision`.
@@ -80,6 +93,45 @@ impl std::str::FromStr for PrecisionSetting {
     }
 }
 
+/// `runtime.device`.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceSetting {
+    /// CUDA device 0 where libtorch has CUDA and sees a GPU, else the CPU.
+    #[default]
+    Auto,
+    /// The CPU.
+    Cpu,
+    /// CUDA device 0; an error at start where there is none.
+    Cuda,
+}
+
+impl DeviceSetting {
+    /// The name in a config file: `auto`, `cpu` or `cuda`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Cpu => "cpu",
+            Self::Cuda => "cuda",
+        }
+    }
+}
+
+impl std::str::FromStr for DeviceSetting {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "cpu" => Ok(Self::Cpu),
+            "cuda" => Ok(Self::Cuda),
+            other => Err(format!("device must be auto, cpu or cuda, got {other:?}")),
+        }
+    }
+}
+
 impl Default for RuntimeConfig {
     fn default() -> Self {
         Self {
@@ -88,6 +140,7 @@ impl Default for RuntimeConfig {
             torch_threads: 1,
             learner_torch_threads: 0,
             precision: PrecisionSetting::Auto,
+            device: DeviceSetting::Auto,
         }
     }
 }
@@ -111,7 +164,9 @@ impl RuntimeConfig {
         }
     }
 
-    /// Range and relation checks, each with its dotted key.
+    /// Range and relation checks, each with its dotted key. Pure: whether
+    /// `device` can be met is the learner's question at start (and
+    /// `doctor`'s), not the configuration's.
     pub fn validate(&self) -> Vec<(String, String)> {
         let mut problems = Checks::new("runtime");
         problems.within("worker_threads", self.worker_threads, 1..=256);

@@ -232,6 +232,7 @@ pub fn small_table(capacity: usize) -> Table {
             min_size_to_sample: 1,
             samples_per_insert: 0.0,
             tolerance: 0.0,
+            ramp: None,
         },
     };
     Table::new(config, TableMetrics::unregistered("t"))

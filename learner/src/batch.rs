@@ -5,11 +5,12 @@
 //! against the network's spec, and the importance weights. An MLP's batches
 //! go from the replay's sparse entries straight into sparse rows
 //! (`crossroads_model::Observations::from_encoded`), with no dense rows in
-//! between.
+//! between. The tensors are built on the CPU; a trainer on another device
+//! moves them there ([`TrainingBatch::to_device`]).
 
 use crossroads_model::{NetworkSpec, Observations};
 use crossroads_types::{Sample, TransitionBatch};
-use tch::Tensor;
+use tch::{Device, Tensor};
 
 use crate::LearnerError;
 
@@ -43,6 +44,20 @@ impl TrainingBatch {
     /// Whether the batch is empty.
     pub fn is_empty(&self) -> bool {
         self.keys.is_empty()
+    }
+
+    /// The same batch with its tensors on `device` (a CUDA learner's);
+    /// the keys are copied.
+    pub fn to_device(&self, device: Device) -> Self {
+        Self {
+            obs: self.obs.to_device(device),
+            actions: self.actions.to_device(device),
+            rewards: self.rewards.to_device(device),
+            discounts: self.discounts.to_device(device),
+            next_obs: self.next_obs.to_device(device),
+            weights: self.weights.to_device(device),
+            keys: self.keys.clone(),
+        }
     }
 
     /// The tensors of a sampled batch. Fails, naming the problem, when the

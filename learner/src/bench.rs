@@ -10,6 +10,7 @@ use crossroads_config::{Config, LearnerConfig, PrecisionSetting, SimConfig};
 use crossroads_model::{NetworkSpec, Precision, Work};
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use tch::Device;
 
 use crate::LearnerError;
 use crate::batch::TrainingBatch;
@@ -133,7 +134,8 @@ pub fn median(v: &[f64]) -> f64 {
 /// Times `rounds` rounds of updates of at least `round_time` each on a
 /// fixed pool of in-memory batches (data generation is not timed), after a
 /// warm-up; the network is `sim`'s and `config`'s, the optimizer
-/// `config`'s, computing in the format `precision` chooses for it.
+/// `config`'s, computing in the format `precision` chooses for it, on the
+/// CPU.
 pub fn updates_per_second(
     sim: &SimConfig,
     config: &LearnerConfig,
@@ -141,8 +143,22 @@ pub fn updates_per_second(
     rounds: usize,
     round_time: Duration,
 ) -> Result<UpdateRate, LearnerError> {
+    updates_per_second_on(sim, config, precision, Device::Cpu, rounds, round_time)
+}
+
+/// [`updates_per_second`] of a trainer on `device` (the learner's,
+/// `runtime.device`); the batches start on the CPU, as sampled ones do,
+/// so each update includes moving its batch there.
+pub fn updates_per_second_on(
+    sim: &SimConfig,
+    config: &LearnerConfig,
+    precision: PrecisionSetting,
+    device: Device,
+    rounds: usize,
+    round_time: Duration,
+) -> Result<UpdateRate, LearnerError> {
     let tc = TrainerConfig::from_config(sim, config)?;
-    let precision = Precision::choose(precision, &tc.spec, Work::Training);
+    let precision = Precision::choose_on(precision, &tc.spec, Work::Training, device);
     let mut rng = SplitMix::new(7);
     let batches: Vec<TrainingBatch> = (0..8)
         .map(|i| {
@@ -152,7 +168,7 @@ pub fn updates_per_second(
             TrainingBatch::from_batch(&b, &weights, keys, &tc.spec)
         })
         .collect::<Result<_, _>>()?;
-    let mut trainer = Trainer::new(tc)?;
+    let mut trainer = Trainer::new_on(tc, device)?;
     trainer.set_precision(precision);
     for b in batches.iter().take(4) {
         trainer.update(b)?;

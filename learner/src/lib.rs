@@ -22,7 +22,10 @@
 //! second and the time spent waiting for samples.
 //!
 //! The whole configuration is the `[learner]` section
-//! ([`crossroads_config::LearnerConfig`]).
+//! ([`crossroads_config::LearnerConfig`]), with `runtime.device` for where
+//! the networks, batches and optimizer state live (the CPU or CUDA device
+//! 0, [`Trainer::new_on`]; everything published or stored comes back to
+//! the CPU).
 
 pub mod batch;
 pub mod bench;
@@ -43,4 +46,4 @@ pub use error::LearnerError;
 pub use metrics::LearnerMetrics;
 pub use optimizer::{Optimizer, OptimizerConfig};
 pub use server::{RunningLearner, run, start};
-pub use trainer::{Trainer, TrainerConfig, UpdateStats};
+pub use trainer::{EarlyPhase, Trainer, TrainerConfig, UpdateStats};

@@ -6,12 +6,18 @@
 //! benchmark runs the same arithmetic. State tensors are named after
 //! PyTorch's state keys: `square_avg.<variable>` for RMSProp,
 //! `exp_avg.<variable>` and `exp_avg_sq.<variable>` for Adam.
+//!
+//! On the CPU a step is one fused pass over each parameter's memory
+//! (`fused`); with parameters elsewhere (a CUDA learner) it is the same
+//! rule, with the same constants, as tensor operations where the
+//! parameters are. The state is the same in both, and [`Optimizer::state`]
+//! returns it on the CPU.
 
 use std::collections::HashMap;
 
 use crossroads_config::{LearnerConfig, OptimizerKind};
 use crossroads_model::ModelError;
-use tch::{Kind, Tensor};
+use tch::{Device, Kind, Tensor};
 
 mod fused;
 
@@ -41,6 +47,21 @@ pub enum OptimizerConfig {
 }
 
 impl OptimizerConfig {
+    /// Its step size.
+    pub fn learning_rate(&self) -> f64 {
+        match *self {
+            Self::Rmsprop { lr, .. } | Self::Adam { lr, .. } => lr,
+        }
+    }
+
+    /// The same optimizer with step size `learning_rate`.
+    pub fn with_learning_rate(mut self, learning_rate: f64) -> Self {
+        match &mut self {
+            Self::Rmsprop { lr, .. } | Self::Adam { lr, .. } => *lr = learning_rate,
+        }
+        self
+    }
+
     /// The optimizer `config` asks for.
     pub fn from_config(config: &LearnerConfig) -> Self {
         match config.optimizer {
@@ -86,6 +107,8 @@ pub struct Optimizer {
     config: OptimizerConfig,
     params: Vec<Param>,
     steps: u64,
+    /// Every parameter is on the CPU: steps take the fused pass.
+    fused: bool,
 }
 
 impl std::fmt::Debug for Optimizer {
@@ -94,14 +117,18 @@ impl std::fmt::Debug for Optimizer {
             .field("config", &self.config)
             .field("params", &self.params.len())
             .field("steps", &self.steps)
+            .field("fused", &self.fused)
             .finish()
     }
 }
 
 impl Optimizer {
     /// An optimizer of `params` (name, variable; the variables are updated
-    /// in place), with zero state.
+    /// in place), with zero state on the parameters' device. Parameters
+    /// all on the CPU take the fused step; any elsewhere, the step as
+    /// tensor operations.
     pub fn new(config: OptimizerConfig, params: Vec<(String, Tensor)>) -> Self {
+        let fused = params.iter().all(|(_, p)| p.device() == Device::Cpu);
         let slots = config.slot_names().len();
         let params = params
             .into_iter()
@@ -118,7 +145,27 @@ impl Optimizer {
             config,
             params,
             steps: 0,
+            fused,
         }
+    }
+
+    /// This optimizer taking its step as tensor operations even where the
+    /// fused CPU pass applies: what a learner off the CPU runs, so that
+    /// the two can be compared on any machine.
+    pub fn unfused(mut self) -> Self {
+        self.fused = false;
+        self
+    }
+
+    /// Whether steps take the fused CPU pass (every parameter on the CPU,
+    /// and not [`Optimizer::unfused`]).
+    pub fn is_fused(&self) -> bool {
+        self.fused
+    }
+
+    /// Sets the step size of the steps to come (the state is kept).
+    pub fn set_learning_rate(&mut self, learning_rate: f64) {
+        self.config = self.config.with_learning_rate(learning_rate);
     }
 
     /// The hyperparameters.
@@ -157,9 +204,11 @@ impl Optimizer {
     /// down to it; then each parameter and its state in one pass over
     /// memory. Returns the norm before clipping.
     ///
-    /// The arithmetic is PyTorch's (in f32); the pass is fused because the
-    /// same rule as separate tensor operations reads and writes every
-    /// parameter a dozen times, a third of a whole update of the MLP.
+    /// The arithmetic is PyTorch's (in f32); on the CPU the pass is fused
+    /// because the same rule as separate tensor operations reads and
+    /// writes every parameter a dozen times, a third of a whole update of
+    /// the MLP. Off the CPU it is those tensor operations, on the
+    /// parameters' device.
     pub fn step(&mut self, grads: &[Tensor], max_norm: f64) -> Result<f64, ModelError> {
         if grads.len() != self.params.len() {
             return Err(ModelError::Format(format!(
@@ -179,6 +228,9 @@ impl Optimizer {
                     p.value.size()
                 )));
             }
+        }
+        if !self.fused {
+            return Ok(self.step_tensors(&grads, max_norm));
         }
         let total = grads
             .iter()
@@ -211,20 +263,87 @@ impl Optimizer {
         Ok(total)
     }
 
-    /// The state as named tensors (copies) and the step count.
+    /// [`Optimizer::step`] with the parameters off the CPU: the global
+    /// norm (summed in f64) and the rule of [`fused::Rule`], with its
+    /// constants, as tensor operations on the parameters' device. Returns
+    /// the norm before clipping. `grads` are checked already.
+    fn step_tensors(&mut self, grads: &[Tensor], max_norm: f64) -> f64 {
+        let total = if grads.is_empty() {
+            0.0
+        } else {
+            let squares: Vec<Tensor> = grads.iter().map(|g| g.square().sum(Kind::Double)).collect();
+            Tensor::stack(&squares, 0)
+                .sum(Kind::Double)
+                .double_value(&[])
+                .sqrt()
+        };
+        let scale = if max_norm > 0.0 && total > max_norm {
+            (max_norm / (total + 1e-6)) as f32
+        } else {
+            1.0
+        };
+        self.steps += 1;
+        let rule = fused::Rule::new(self.config, self.steps);
+        tch::no_grad(|| {
+            for (p, g) in self.params.iter_mut().zip(grads) {
+                let g = g * f64::from(scale);
+                match (rule, p.slots.as_mut_slice()) {
+                    (fused::Rule::Rmsprop { lr, decay, eps }, [sq]) => {
+                        // v += (1 - decay)(g^2 - v); p -= lr g / (sqrt(v) + eps)
+                        let dv = (g.square() - &*sq) * f64::from(1.0 - decay);
+                        *sq += dv;
+                        let dp = &g * f64::from(lr) / (sq.sqrt() + f64::from(eps));
+                        p.value -= dp;
+                    }
+                    (
+                        fused::Rule::Adam {
+                            step_size,
+                            beta1,
+                            beta2,
+                            root_correction,
+                            eps,
+                        },
+                        [m, v],
+                    ) => {
+                        // m += (1 - b1)(g - m); v += (1 - b2)(g^2 - v);
+                        // p -= step_size m / (sqrt(v) root_correction + eps)
+                        let dm = (&g - &*m) * f64::from(1.0 - beta1);
+                        *m += dm;
+                        let dv = (g.square() - &*v) * f64::from(1.0 - beta2);
+                        *v += dv;
+                        let denominator = v.sqrt() * f64::from(root_correction) + f64::from(eps);
+                        let dp = &*m * f64::from(step_size) / denominator;
+                        p.value -= dp;
+                    }
+                    (rule, slots) => {
+                        debug_assert!(false, "{rule:?} with {} state slots", slots.len());
+                    }
+                }
+            }
+        });
+        total
+    }
+
+    /// The state as named tensors (copies, on the CPU) and the step count.
     pub fn state(&self) -> (Vec<(String, Tensor)>, u64) {
         let names = self.config.slot_names();
         let mut out = Vec::new();
         for p in &self.params {
             for (slot, t) in names.iter().zip(&p.slots) {
-                out.push((format!("{slot}.{}", p.name), t.detach().copy()));
+                let t = if t.device() == Device::Cpu {
+                    t.detach().copy()
+                } else {
+                    t.detach().to_device(Device::Cpu)
+                };
+                out.push((format!("{slot}.{}", p.name), t));
             }
         }
         (out, self.steps)
     }
 
     /// Restores state written by [`Optimizer::state`]: every slot of every
-    /// parameter once, with its shape and finite values. All or nothing.
+    /// parameter once, with its shape and finite values, copied onto the
+    /// parameters' device. All or nothing.
     pub fn load_state(
         &mut self,
         tensors: Vec<(String, Tensor)>,

@@ -105,6 +105,10 @@ pub async fn start(
     let server = security.builder(LEARNER_OPEN_CALLS)?;
     let client_security = ClientSecurity::load(&config.transport)?;
     let spec = TrainerConfig::from_config(&config.sim, lc)?.spec;
+    // The device before anything is bound: `runtime.device = "cuda"`
+    // without CUDA stops the start here, naming what is missing (the
+    // training thread resolves it again when it builds the networks).
+    crossroads_model::resolve_device(config.runtime.device)?;
     if let Some(n) = config.runtime.torch_threads() {
         tch::set_num_threads(n as i32);
     }

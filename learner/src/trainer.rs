@@ -9,10 +9,16 @@
 //! copy every `target_period` updates, or a Polyak step. Both networks
 //! compute in the [`Precision`] the run chooses for training; their
 //! variables stay f32.
+//!
+//! Networks, target network and optimizer state live on one device
+//! ([`Trainer::new_on`]: the CPU, or CUDA device 0 for `runtime.device`);
+//! each batch is moved there for its update, and what comes back (the
+//! statistics, the priorities, the state a checkpoint stores) is on the
+//! CPU.
 
 use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate};
 use crossroads_model::{NetworkSpec, Precision, QNetwork, network_spec};
-use tch::{Kind, Tensor};
+use tch::{Device, Kind, Tensor};
 
 use crate::LearnerError;
 use crate::batch::TrainingBatch;
@@ -79,22 +85,58 @@ pub struct UpdateStats {
     pub priorities: Vec<f32>,
 }
 
+/// An early phase of the run with its own learning rate and target
+/// period (`learner.early_*`): the first `updates` updates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EarlyPhase {
+    /// Updates it lasts.
+    pub updates: u64,
+    /// Its learning rate.
+    pub learning_rate: f64,
+    /// Its updates between hard target copies.
+    pub target_period: u64,
+}
+
+impl EarlyPhase {
+    /// The phase `[learner]` asks for; `None` without one (no
+    /// `early_updates`, or neither early setting).
+    pub fn from_config(c: &LearnerConfig) -> Option<Self> {
+        let wanted = c.early_learning_rate.is_some() || c.early_target_period.is_some();
+        (c.early_updates > 0 && wanted).then(|| Self {
+            updates: c.early_updates,
+            learning_rate: c.early_learning_rate.unwrap_or(c.learning_rate),
+            target_period: c.early_target_period.unwrap_or(c.target_period),
+        })
+    }
+}
+
 /// The networks and optimizer of the learner. Owned by one thread.
 #[derive(Debug)]
 pub struct Trainer {
     config: TrainerConfig,
+    early: Option<EarlyPhase>,
     online: QNetwork,
     target: QNetwork,
     optimizer: Optimizer,
     step: u64,
+    device: Device,
 }
 
 impl Trainer {
     /// Fresh networks (the target a copy of the online one) and a zero
-    /// optimizer state.
+    /// optimizer state, on the CPU.
     pub fn new(config: TrainerConfig) -> Result<Self, LearnerError> {
-        let online = QNetwork::new(config.spec.clone(), config.seed)?;
-        let mut target = QNetwork::new(config.spec.clone(), config.seed)?;
+        Self::new_on(config, Device::Cpu)
+    }
+
+    /// [`Trainer::new`] on `device` (what `runtime.device` resolves to,
+    /// `crossroads_model::resolve_device`): both networks and the
+    /// optimizer state there. The initial weights are the CPU's of the
+    /// same seed. Off the CPU the optimizer runs its rule as tensor
+    /// operations instead of the fused CPU pass ([`Optimizer::step`]).
+    pub fn new_on(config: TrainerConfig, device: Device) -> Result<Self, LearnerError> {
+        let online = QNetwork::new_on(config.spec.clone(), config.seed, device)?;
+        let mut target = QNetwork::new_on(config.spec.clone(), config.seed, device)?;
         target.copy_from(&online)?;
         let optimizer = Optimizer::new(config.optimizer, online.parameters());
         Ok(Self {
@@ -103,7 +145,32 @@ impl Trainer {
             target,
             optimizer,
             step: 0,
+            device,
+            early: None,
         })
+    }
+
+    /// Gives the first `phase.updates` updates the phase's learning rate
+    /// and target period; the configured ones hold after (counted from
+    /// the trainer's step, so a restored trainer is in the right phase).
+    pub fn set_early_phase(&mut self, phase: Option<EarlyPhase>) {
+        self.early = phase;
+    }
+
+    /// The learning rate and target period of the next update.
+    fn phase_settings(&self) -> (f64, u64) {
+        match self.early {
+            Some(e) if self.step < e.updates => (e.learning_rate, e.target_period),
+            _ => (
+                self.config.optimizer.learning_rate(),
+                self.config.target_period,
+            ),
+        }
+    }
+
+    /// Where the networks and the optimizer state are.
+    pub fn device(&self) -> Device {
+        self.device
     }
 
     /// The hyperparameters.
@@ -139,14 +206,15 @@ impl Trainer {
     }
 
     /// Replaces the whole training state (after loading a checkpoint):
-    /// online and target weights, optimizer state and the update count.
-    /// Checks everything before changing anything.
+    /// online and target weights, optimizer state and the update count,
+    /// onto this trainer's device. Checks everything before changing
+    /// anything.
     pub fn restore(&mut self, state: TrainerState) -> Result<(), LearnerError> {
         let precision = self.online.precision();
-        let mut online = QNetwork::new(self.config.spec.clone(), 0)?;
+        let mut online = QNetwork::new_on(self.config.spec.clone(), 0, self.device)?;
         online.load_safetensors(&state.online)?;
         online.set_precision(precision);
-        let mut target = QNetwork::new(self.config.spec.clone(), 0)?;
+        let mut target = QNetwork::new_on(self.config.spec.clone(), 0, self.device)?;
         target.load_safetensors(&state.target)?;
         target.set_precision(precision);
         let mut optimizer = Optimizer::new(self.config.optimizer, online.parameters());
@@ -159,8 +227,20 @@ impl Trainer {
         Ok(())
     }
 
-    /// One update on `batch`, stage by stage.
+    /// One update on `batch`, stage by stage. A batch on the CPU is moved
+    /// to the trainer's device first, when that is another.
     pub fn update(&mut self, batch: &TrainingBatch) -> Result<UpdateStats, LearnerError> {
+        if self.device == Device::Cpu {
+            self.update_here(batch)
+        } else {
+            let moved = batch.to_device(self.device);
+            self.update_here(&moved)
+        }
+    }
+
+    /// [`Trainer::update`] of a batch on the trainer's device. The
+    /// priorities and statistics are read back to the CPU.
+    fn update_here(&mut self, batch: &TrainingBatch) -> Result<UpdateStats, LearnerError> {
         let c = &self.config;
 
         // Targets, without gradients: double DQN over the n-step return.
@@ -187,6 +267,8 @@ impl Trainer {
         }
 
         // Optimizer step, the gradient clipped by its global norm.
+        let (learning_rate, target_period) = self.phase_settings();
+        self.optimizer.set_learning_rate(learning_rate);
         let grads = self.optimizer.gradients(&loss)?;
         let grad_norm = self.optimizer.step(&grads, c.max_grad_norm)?;
         self.step += 1;
@@ -199,7 +281,7 @@ impl Trainer {
         // Target network: a copy every period, or a little every update.
         match c.target_update {
             TargetUpdate::Period => {
-                if self.step.is_multiple_of(c.target_period) {
+                if self.step.is_multiple_of(target_period) {
                     self.target.copy_from(&self.online)?;
                 }
             }
@@ -217,7 +299,8 @@ impl Trainer {
         })
     }
 
-    /// The training state as a checkpoint stores it.
+    /// The training state as a checkpoint stores it, on the CPU whatever
+    /// the trainer's device.
     pub fn state(&self, version: u64) -> Result<TrainerState, LearnerError> {
         let (optimizer, optimizer_steps) = self.optimizer.state();
         let optimizer = relayout_slots(&self.online, optimizer);

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crossroads_common::Shutdown;
 use crossroads_config::Config;
-use crossroads_model::{Precision, Work};
+use crossroads_model::{Precision, Work, device_name, resolve_device};
 use crossroads_transport::WeightsSlot;
 use crossroads_transport::weights_shm::ShmWeightsPublisher;
 use crossroads_types::Weights;
@@ -23,7 +23,7 @@ use crate::batch::TrainingBatch;
 use crate::checkpoint::{CheckpointEntry, CheckpointStore, NewCheckpoint};
 use crate::metrics::LearnerMetrics;
 use crate::sampler::{NewPriorities, Prefetched};
-use crate::trainer::{Trainer, TrainerConfig};
+use crate::trainer::{EarlyPhase, Trainer, TrainerConfig};
 
 /// How often idle loops look for late shared-memory subscribers.
 const CONNECT_EVERY: Duration = Duration::from_millis(200);
@@ -143,20 +143,33 @@ enum Event {
 }
 
 impl Learner {
-    /// Builds the networks, resumes from the newest checkpoint when asked
-    /// (an unreadable one is skipped for the one before, with a warning),
-    /// opens the shared-memory publisher and publishes the first weights.
-    /// Runs on the training thread.
+    /// Builds the networks on the device `runtime.device` resolves to
+    /// (failing, naming what is missing, when `cuda` cannot be met),
+    /// resumes from the newest checkpoint when asked (an unreadable one is
+    /// skipped for the one before, with a warning), opens the
+    /// shared-memory publisher and publishes the first weights. Runs on
+    /// the training thread.
     pub fn new(shared: Arc<Shared>) -> Result<Self, LearnerError> {
         let config = &shared.config;
-        let mut trainer = Trainer::new(TrainerConfig::from_config(&config.sim, &config.learner)?)?;
-        let precision = Precision::choose(
+        let device = resolve_device(config.runtime.device)?;
+        let mut trainer = Trainer::new_on(
+            TrainerConfig::from_config(&config.sim, &config.learner)?,
+            device,
+        )?;
+        let precision = Precision::choose_on(
             config.runtime.precision,
             &trainer.config().spec,
             Work::Training,
+            device,
         );
         trainer.set_precision(precision);
-        tracing::info!(%precision, "learner network number format");
+        trainer.set_early_phase(EarlyPhase::from_config(&config.learner));
+        tracing::info!(
+            %precision,
+            device = %device_name(device),
+            runtime_device = config.runtime.device.name(),
+            "learner network number format and device"
+        );
         let shm = if config.learner.shm_publish {
             let bytes = trainer.online().to_safetensors(0)?.len();
             Some(

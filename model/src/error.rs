@@ -45,6 +45,10 @@ pub enum ModelError {
     /// The bytes are not valid weights of this format.
     #[error("invalid weights file: {0}")]
     Format(String),
+    /// The device `runtime.device` asks for is not there (the message names
+    /// what is missing).
+    #[error("{0}")]
+    Device(String),
     /// libtorch refused.
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),

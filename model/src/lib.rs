@@ -18,9 +18,12 @@
 //! [`weights`] is the on-disk and on-wire format: safetensors with the spec
 //! and a version number in its metadata, readable by Python's safetensors
 //! and PyTorch. [`network_spec`] is the network a run's `[sim]` and
-//! `[learner]` sections describe.
+//! `[learner]` sections describe. Networks are built on the CPU;
+//! [`QNetwork::new_on`] moves one to the device [`resolve_device`] picks
+//! for `runtime.device` (the learner's; actors stay on the CPU).
 
 mod config;
+mod device;
 mod error;
 mod native;
 mod network;
@@ -33,6 +36,7 @@ pub use crossroads_types::spec::{
     self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
     num_actions_of,
 };
+pub use device::{CudaSupport, device_name, resolve_device};
 pub use error::ModelError;
 pub use native::NativeMlp;
 pub use network::{QBatch, QNetwork};

@@ -2,13 +2,17 @@
 //! variables, with the batched inference actors use and the copies the
 //! learner's target network needs.
 //!
-//! Every network is built on the CPU. The trunk is an MLP, or 3x3
+//! Every network is built on the CPU, from its seed, and the learner's
+//! then moves to its device ([`QNetwork::new_on`]: the same seed gives the
+//! same weights on any device). The trunk is an MLP, or 3x3
 //! convolutions (stride 1, then 2) and one fully connected layer, with the
 //! ego features joined after the convolutions. [`QNetwork::infer`] (dense
 //! rows) and [`QNetwork::infer_sparse`] (each row's non-zero pairs) are the
 //! actors' no-grad calls and refuse malformed or non-finite input;
 //! [`QNetwork::copy_from`] and [`QNetwork::soft_update_from`] serve the
-//! target network.
+//! target network. On a device other than the CPU the forward passes move
+//! their input there ([`QNetwork::q_values_of`]); weights files and what
+//! [`QNetwork::infer`] returns are read back to the CPU.
 //!
 //! Invariant: outside the network a variable has PyTorch's layout
 //! ([`QNetwork::named_variables`], weights files, optimizer state in
@@ -110,6 +114,9 @@ pub struct QNetwork {
     value: nn::Linear,
     advantage: nn::Linear,
     precision: Precision,
+    /// Where the variables are (the CPU unless [`QNetwork::new_on`] said
+    /// otherwise).
+    device: Device,
 }
 
 impl std::fmt::Debug for QNetwork {
@@ -118,6 +125,7 @@ impl std::fmt::Debug for QNetwork {
             .field("spec", &self.spec)
             .field("parameters", &self.num_parameters())
             .field("precision", &self.precision)
+            .field("device", &self.device)
             .finish_non_exhaustive()
     }
 }
@@ -174,6 +182,13 @@ impl QNetwork {
     /// A network of `spec` on the CPU, initialized from `seed` (the same
     /// seed gives the same weights).
     pub fn new(spec: NetworkSpec, seed: u64) -> Result<Self, ModelError> {
+        Self::new_on(spec, seed, Device::Cpu)
+    }
+
+    /// A network of `spec` on `device` (the learner's, `runtime.device`),
+    /// initialized from `seed` on the CPU and then moved, so that the same
+    /// seed gives the same weights on every device.
+    pub fn new_on(spec: NetworkSpec, seed: u64, device: Device) -> Result<Self, ModelError> {
         spec.validate()?;
         // libtorch's generator is global: seeding and drawing the initial
         // weights must not interleave with another thread's, or the same
@@ -230,14 +245,27 @@ impl QNetwork {
             spec.num_actions,
             Default::default(),
         );
-        Ok(Self {
+        let mut net = Self {
             spec,
             vs,
             trunk,
             value,
             advantage,
             precision: Precision::F32,
-        })
+            device: Device::Cpu,
+        };
+        if device != Device::Cpu {
+            // Moves each variable's data in place: the layers' handles
+            // share the variables, so they follow.
+            net.vs.set_device(device);
+            net.device = device;
+        }
+        Ok(net)
+    }
+
+    /// Where the variables are, and where the forward passes compute.
+    pub fn device(&self) -> Device {
+        self.device
     }
 
     /// The number format of the trunk (fp32 from [`QNetwork::new`]).
@@ -320,10 +348,22 @@ impl QNetwork {
     }
 
     /// [`QNetwork::q_values`] of observations in either form (see
-    /// [`Observations::new`] for the fast one).
+    /// [`Observations::new`] for the fast one). On a network off the CPU
+    /// the observations are moved to its device first (a no-op where they
+    /// are there already) and the Q-values are on that device.
     pub fn q_values_of(&self, obs: &Observations) -> Result<Tensor, ModelError> {
         self.check_input(obs)?;
-        Ok(self.forward(obs))
+        Ok(self.forward_on_device(obs))
+    }
+
+    /// [`QNetwork::forward`] of `obs` moved to the network's device; on
+    /// the CPU, `obs` as it is.
+    fn forward_on_device(&self, obs: &Observations) -> Tensor {
+        if self.device == Device::Cpu {
+            self.forward(obs)
+        } else {
+            self.forward(&obs.to_device(self.device))
+        }
     }
 
     fn check_input(&self, obs: &Observations) -> Result<(), ModelError> {
@@ -358,6 +398,11 @@ impl QNetwork {
     pub fn streams(&self, obs: &Tensor) -> Result<(Tensor, Tensor), ModelError> {
         let obs = Observations::Dense(obs.shallow_clone());
         self.check_input(&obs)?;
+        let obs = if self.device == Device::Cpu {
+            obs
+        } else {
+            obs.to_device(self.device)
+        };
         let h = self.trunk_features(&obs);
         Ok((self.value.forward(&h), self.advantage.forward(&h)))
     }
@@ -505,7 +550,8 @@ impl QNetwork {
     }
 
     fn infer_observations(&self, x: &Observations) -> Result<QBatch, ModelError> {
-        let q = tch::no_grad(|| self.forward(x));
+        // `Vec::try_from` copies from any device.
+        let q = tch::no_grad(|| self.forward_on_device(x));
         let q = Vec::<f32>::try_from(q.flatten(0, -1))?;
         Ok(QBatch {
             q,
@@ -547,7 +593,8 @@ impl QNetwork {
     }
 
     /// The weights as safetensors bytes, with the spec and `version` in the
-    /// file's metadata (see [`crate::weights`]).
+    /// file's metadata (see [`crate::weights`]); the same bytes whatever
+    /// the device (the values are read back to the CPU).
     pub fn to_safetensors(&self, version: u64) -> Result<Vec<u8>, ModelError> {
         let meta = WeightsMeta {
             version,
@@ -566,10 +613,10 @@ impl QNetwork {
         Ok((net, version))
     }
 
-    /// Loads weights into this network; returns their version. The file's
-    /// spec must equal this network's, and its tensors must be exactly this
-    /// network's, with the same shapes and finite values; nothing changes
-    /// when any check fails.
+    /// Loads weights into this network, on whatever device it is; returns
+    /// their version. The file's spec must equal this network's, and its
+    /// tensors must be exactly this network's, with the same shapes and
+    /// finite values; nothing changes when any check fails.
     pub fn load_safetensors(&mut self, bytes: &[u8]) -> Result<u64, ModelError> {
         let (metadata, tensors) = weights::decode(bytes)?;
         let meta = WeightsMeta::from_metadata(&metadata)?;

@@ -8,10 +8,11 @@
 //! [`Observations::new`] (dense values) and [`Observations::from_encoded`]
 //! (the replay's encoded entries, checked) pick the form: sparse rows for
 //! an MLP trunk with hidden layers, dense otherwise (a conv trunk's first
-//! layer is a convolution).
+//! layer is a convolution). Both build their tensors on the CPU;
+//! [`Observations::to_device`] moves them to a network's device.
 
 use crossroads_types::codec::{self, CodecError, ObservationEncoding};
-use tch::{Kind, Tensor};
+use tch::{Device, Kind, Tensor};
 
 use crate::ModelError;
 use crate::spec::{NetworkSpec, TrunkKind};
@@ -125,22 +126,36 @@ impl SparseRows {
         self.indices.numel()
     }
 
-    /// The rows as a dense `[rows, width]` tensor.
+    /// The same rows with their tensors on `device` (shallow copies where
+    /// they are there already).
+    pub fn to_device(&self, device: Device) -> Self {
+        Self {
+            indices: self.indices.to_device(device),
+            values: self.values.to_device(device),
+            offsets: self.offsets.to_device(device),
+            rows: self.rows,
+            width: self.width,
+        }
+    }
+
+    /// The rows as a dense `[rows, width]` tensor, on the device of the
+    /// rows' tensors.
     pub fn to_dense(&self) -> Tensor {
+        let device = self.values.device();
         if self.rows == 0 {
-            return Tensor::zeros([0, self.width], (Kind::Float, tch::Device::Cpu));
+            return Tensor::zeros([0, self.width], (Kind::Float, device));
         }
         let counts = Tensor::cat(
             &[
                 self.offsets.narrow(0, 1, self.rows - 1),
-                Tensor::from_slice(&[self.indices.numel() as i64]),
+                Tensor::from_slice(&[self.indices.numel() as i64]).to_device(device),
             ],
             0,
         ) - &self.offsets;
-        let row_of = Tensor::arange(self.rows, (Kind::Int64, tch::Device::Cpu))
+        let row_of = Tensor::arange(self.rows, (Kind::Int64, device))
             .repeat_interleave_self_tensor(&counts, 0, None);
         let flat = row_of * self.width + &self.indices;
-        Tensor::zeros([self.rows * self.width], (Kind::Float, tch::Device::Cpu))
+        Tensor::zeros([self.rows * self.width], (Kind::Float, device))
             .index_put(&[Some(flat)], &self.values, false)
             .reshape([self.rows, self.width])
     }
@@ -201,6 +216,16 @@ impl Observations {
         match self {
             Observations::Dense(t) => t.size().first().copied().unwrap_or(0),
             Observations::Sparse(s) => s.rows,
+        }
+    }
+
+    /// The same observations with their tensors on `device` (shallow
+    /// copies where they are there already): what a network off the CPU
+    /// reads.
+    pub fn to_device(&self, device: Device) -> Self {
+        match self {
+            Observations::Dense(t) => Observations::Dense(t.to_device(device)),
+            Observations::Sparse(s) => Observations::Sparse(s.to_device(device)),
         }
     }
 

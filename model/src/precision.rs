@@ -3,9 +3,11 @@
 //!
 //! Variables, weights files and optimizer state are f32 in either format.
 //! `auto` picks bf16 only for training a conv trunk on a CPU with AMX-BF16
-//! ([`Precision::choose`]).
+//! ([`Precision::choose`]); on a CUDA device `auto` is fp32
+//! ([`Precision::choose_on`]).
 
 use crossroads_config::PrecisionSetting;
+use tch::Device;
 
 use crate::spec::{NetworkSpec, TrunkKind};
 
@@ -44,6 +46,22 @@ impl Precision {
     /// without matrix units bf16 is not measured to pay (figures:
     /// reports/performance/README.md, "bf16").
     pub fn choose(setting: PrecisionSetting, spec: &NetworkSpec, work: Work) -> Self {
+        Self::choose_on(setting, spec, work, Device::Cpu)
+    }
+
+    /// [`Precision::choose`] for a network on `device`: on the CPU the
+    /// same; elsewhere (a CUDA learner) `auto` is fp32, since the AMX
+    /// measurement says nothing about a GPU and bf16 there is not
+    /// measured, while an explicit `bf16` is kept.
+    pub fn choose_on(
+        setting: PrecisionSetting,
+        spec: &NetworkSpec,
+        work: Work,
+        device: Device,
+    ) -> Self {
+        if device != Device::Cpu && setting == PrecisionSetting::Auto {
+            return Self::F32;
+        }
         match setting {
             PrecisionSetting::F32 => Self::F32,
             PrecisionSetting::Bf16 => Self::Bf16,

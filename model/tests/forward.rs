@@ -554,3 +554,230 @@ fn the_native_mlp_gives_the_networks_q_values() {
         "no hidden layer"
     );
 }
+
+/// `runtime.device`: `cpu` is the CPU; `auto` is CUDA device 0 only where
+/// libtorch has CUDA and sees a GPU; `cuda` without either is an error
+/// naming which is missing. The first half reasons over stated support,
+/// so it holds on any machine; the second asks this one.
+#[test]
+fn the_device_setting_resolves_to_the_cpu_or_names_what_is_missing() {
+    use crossroads_config::DeviceSetting;
+    use crossroads_model::{CudaSupport, device_name, resolve_device};
+    let cpu_build = CudaSupport {
+        built_with_cuda: false,
+        devices: 0,
+        cudnn: false,
+    };
+    let no_gpu = CudaSupport {
+        built_with_cuda: true,
+        devices: 0,
+        cudnn: false,
+    };
+    let gpu = CudaSupport {
+        built_with_cuda: true,
+        devices: 2,
+        cudnn: true,
+    };
+    for support in [cpu_build, no_gpu, gpu] {
+        assert_eq!(support.resolve(DeviceSetting::Cpu).unwrap(), Device::Cpu);
+    }
+    assert_eq!(cpu_build.resolve(DeviceSetting::Auto).unwrap(), Device::Cpu);
+    assert_eq!(no_gpu.resolve(DeviceSetting::Auto).unwrap(), Device::Cpu);
+    assert_eq!(gpu.resolve(DeviceSetting::Auto).unwrap(), Device::Cuda(0));
+    assert_eq!(gpu.resolve(DeviceSetting::Cuda).unwrap(), Device::Cuda(0));
+    let err = cpu_build
+        .resolve(DeviceSetting::Cuda)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("runtime.device = \"cuda\"") && err.contains("built without CUDA"),
+        "{err}"
+    );
+    let err = no_gpu.resolve(DeviceSetting::Cuda).unwrap_err().to_string();
+    assert!(
+        err.contains("runtime.device = \"cuda\"") && err.contains("no CUDA device"),
+        "{err}"
+    );
+    assert_eq!(device_name(Device::Cpu), "cpu");
+    assert_eq!(device_name(Device::Cuda(0)), "cuda:0");
+
+    // This machine.
+    assert_eq!(resolve_device(DeviceSetting::Cpu).unwrap(), Device::Cpu);
+    let here = CudaSupport::probe();
+    assert_eq!(here.available(), tch::Cuda::is_available());
+    if tch::Cuda::is_available() {
+        assert_eq!(
+            resolve_device(DeviceSetting::Auto).unwrap(),
+            Device::Cuda(0)
+        );
+        assert_eq!(
+            resolve_device(DeviceSetting::Cuda).unwrap(),
+            Device::Cuda(0)
+        );
+    } else {
+        assert_eq!(resolve_device(DeviceSetting::Auto).unwrap(), Device::Cpu);
+        let err = resolve_device(DeviceSetting::Cuda).unwrap_err().to_string();
+        let missing = if here.built_with_cuda {
+            "no CUDA device"
+        } else {
+            "built without CUDA"
+        };
+        assert!(err.contains(missing), "{err}");
+    }
+}
+
+/// On a CUDA learner `runtime.precision = "auto"` is fp32; an explicit
+/// `bf16` stays; on the CPU the choice is [`Precision::choose`]'s.
+#[test]
+fn auto_precision_is_fp32_on_a_cuda_device() {
+    use crossroads_config::PrecisionSetting;
+    use crossroads_model::Work;
+    let conv = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 32]).unwrap();
+    for work in [Work::Training, Work::Acting] {
+        for setting in [
+            PrecisionSetting::Auto,
+            PrecisionSetting::F32,
+            PrecisionSetting::Bf16,
+        ] {
+            assert_eq!(
+                Precision::choose_on(setting, &conv, work, Device::Cpu),
+                Precision::choose(setting, &conv, work)
+            );
+        }
+        let on_cuda = |setting| Precision::choose_on(setting, &conv, work, Device::Cuda(0));
+        assert_eq!(on_cuda(PrecisionSetting::Auto), Precision::F32);
+        assert_eq!(on_cuda(PrecisionSetting::F32), Precision::F32);
+        assert_eq!(on_cuda(PrecisionSetting::Bf16), Precision::Bf16);
+    }
+}
+
+/// A network built for the CPU device is the plain one: same weights from
+/// the same seed, and observations "moved" to the CPU give the same
+/// Q-values in either form.
+#[test]
+fn a_network_on_the_cpu_device_is_the_plain_one() {
+    let spec = plain_mlp(23, vec![8, 4], 3);
+    let plain = QNetwork::new(spec.clone(), 5).expect("valid spec");
+    let on_cpu = QNetwork::new_on(spec, 5, Device::Cpu).expect("valid spec");
+    assert_eq!(on_cpu.device(), Device::Cpu);
+    assert_eq!(plain.device(), Device::Cpu);
+    // Variable by variable: the bytes' header follows a hash map's order.
+    let named = |n: &QNetwork| -> Vec<(String, Vec<f32>)> {
+        n.parameters()
+            .into_iter()
+            .map(|(name, t)| {
+                (
+                    name,
+                    Vec::<f32>::try_from(t.detach().flatten(0, -1)).expect("values"),
+                )
+            })
+            .collect()
+    };
+    assert_eq!(named(&on_cpu), named(&plain));
+    let rows = 4;
+    let values = sparse_rows(23, rows);
+    let sparse = Observations::new(on_cpu.spec(), &values, rows);
+    let dense = Observations::Dense(Tensor::from_slice(&values).reshape([rows as i64, 23]));
+    let q = |obs: &Observations| -> Vec<f32> {
+        Vec::try_from(on_cpu.q_values_of(obs).unwrap().flatten(0, -1)).unwrap()
+    };
+    let want = q(&sparse);
+    for obs in [sparse.to_device(Device::Cpu), dense.to_device(Device::Cpu)] {
+        for (x, y) in q(&obs).iter().zip(&want) {
+            assert!((x - y).abs() < 1e-5, "{want:?}");
+        }
+    }
+}
+
+/// Whether a CUDA device is here to test on. Without one the test says why
+/// on standard error and is skipped, unless CROSSROADS_REQUIRE_CUDA=1,
+/// where it fails naming what is missing.
+fn cuda_or_skip(test: &str) -> bool {
+    if tch::Cuda::is_available() {
+        return true;
+    }
+    let why = crossroads_model::resolve_device(crossroads_config::DeviceSetting::Cuda)
+        .err()
+        .map_or_else(|| "no CUDA device".to_owned(), |e| e.to_string());
+    assert!(
+        std::env::var("CROSSROADS_REQUIRE_CUDA").as_deref() != Ok("1"),
+        "CUDA is required here (CROSSROADS_REQUIRE_CUDA=1) but {why}"
+    );
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
+        "skipped: {test} needs a CUDA device and a CUDA libtorch ({why})"
+    );
+    false
+}
+
+/// On CUDA a network has the CPU's weights of the same seed (the same
+/// weights file, byte for byte), computes the CPU's Q-values from
+/// observations given on the CPU, and loads weights files.
+#[test]
+#[ignore = "needs a CUDA device and a CUDA libtorch: \
+            CROSSROADS_REQUIRE_CUDA=1 cargo test -- --include-ignored"]
+fn a_network_on_cuda_computes_what_the_cpu_one_does() {
+    if !cuda_or_skip("a_network_on_cuda_computes_what_the_cpu_one_does") {
+        return;
+    }
+    let cuda = Device::Cuda(0);
+    for trunk in [TrunkKind::Mlp, TrunkKind::Conv] {
+        let hidden = match trunk {
+            TrunkKind::Conv => vec![4, 8, 32],
+            TrunkKind::Mlp => vec![32, 16],
+        };
+        let spec = NetworkSpec::new("ttg", "ttg", trunk, hidden).expect("valid spec");
+        let cpu_net = QNetwork::new(spec.clone(), 7).expect("network");
+        let mut gpu_net = QNetwork::new_on(spec.clone(), 7, cuda).expect("network");
+        assert_eq!(gpu_net.device(), cuda);
+        assert!(
+            gpu_net.parameters().iter().all(|(_, t)| t.device() == cuda),
+            "{trunk:?}: every variable on the GPU"
+        );
+        assert_eq!(
+            gpu_net.to_safetensors(2).unwrap(),
+            cpu_net.to_safetensors(2).unwrap(),
+            "{trunk:?}: same seed, same weights file"
+        );
+        let rows = 6;
+        let values: Vec<f32> = sparse_rows(spec.input_len() as usize, rows)
+            .into_iter()
+            .map(|v| v.clamp(-1.0, 1.0))
+            .collect();
+        let obs = Observations::new(&spec, &values, rows);
+        let want: Vec<f32> =
+            Vec::try_from(cpu_net.q_values_of(&obs).unwrap().flatten(0, -1)).unwrap();
+        let q = gpu_net.q_values_of(&obs).unwrap();
+        assert_eq!(q.device(), cuda);
+        let got: Vec<f32> = Vec::try_from(q.to_device(Device::Cpu).flatten(0, -1)).unwrap();
+        let inferred = gpu_net.infer(&values, rows).unwrap();
+        // cuDNN may compute convolutions in TF32.
+        for (what, got) in [("q_values_of", &got), ("infer", &inferred.q)] {
+            for (x, y) in got.iter().zip(&want) {
+                assert!(
+                    (x - y).abs() < 1e-3 * y.abs().max(1.0),
+                    "{trunk:?} {what}: {got:?}, CPU {want:?}"
+                );
+            }
+        }
+        // A file written on the CPU loads on the GPU and back.
+        let other = QNetwork::new(spec.clone(), 8).expect("network");
+        let bytes = other.to_safetensors(3).unwrap();
+        assert_eq!(gpu_net.load_safetensors(&bytes).unwrap(), 3);
+        assert_eq!(gpu_net.device(), cuda);
+        // Variable by variable: the bytes' header follows a hash map's order.
+        let (back, _) = QNetwork::from_safetensors(&gpu_net.to_safetensors(3).unwrap()).unwrap();
+        let named = |n: &QNetwork| -> Vec<(String, Vec<f32>)> {
+            n.parameters()
+                .into_iter()
+                .map(|(name, t)| {
+                    let v = Vec::<f32>::try_from(t.detach().to_device(Device::Cpu).flatten(0, -1))
+                        .expect("values");
+                    (name, v)
+                })
+                .collect()
+        };
+        assert_eq!(named(&back), named(&other));
+    }
+}

@@ -131,6 +131,7 @@ pub fn bench_table(capacity: usize) -> Table {
                 min_size_to_sample: 1,
                 samples_per_insert: 0.0,
                 tolerance: 0.0,
+                ramp: None,
             },
         },
         TableMetrics::unregistered("bench"),

@@ -10,6 +10,14 @@
 //!   `tolerance >= max(1, r)` guarantees that when one side must wait the
 //!   other can go, so the two never wait on each other forever.
 //!
+//! With a ramp the ratio moves from an early one to `r` as samples
+//! accumulate: fresh experience early, more reuse late. The gap is then
+//! kept in inserts, `g = inserts - I(samples)`, where `I(s)` is the inserts
+//! the schedule asks for `s` samples (`I(s) = s / r` for a constant ratio),
+//! within `min_size ± tolerance / r(samples)`; for a constant ratio that is
+//! the rule above divided by `r`, and the same reasoning keeps one side
+//! free to go.
+//!
 //! The limiter only answers questions and counts; waiting (with timeouts)
 //! is the table's, done without holding any lock.
 
@@ -22,6 +30,57 @@ pub struct RateLimiterConfig {
     pub samples_per_insert: f64,
     /// Allowed drift of the ratio, in samples.
     pub tolerance: f64,
+    /// An early ratio that moves to `samples_per_insert`; none keeps
+    /// `samples_per_insert` throughout.
+    pub ramp: Option<RatioRamp>,
+}
+
+/// Samples per insert `early` up to `from` samples, moving linearly to the
+/// limiter's `samples_per_insert` at `to` samples, and that ratio after.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RatioRamp {
+    /// Samples per insert at the start (above 0).
+    pub early: f64,
+    /// Samples taken when the ratio starts to move.
+    pub from: u64,
+    /// Samples taken when it reaches `samples_per_insert` (at least `from`).
+    pub to: u64,
+}
+
+impl RatioRamp {
+    /// The ratio after `samples` samples, moving to `late`.
+    pub fn ratio_at(&self, late: f64, samples: f64) -> f64 {
+        let (from, to) = (self.from as f64, self.to as f64);
+        if samples <= from {
+            self.early
+        } else if samples >= to {
+            late
+        } else {
+            self.early + (late - self.early) * (samples - from) / (to - from)
+        }
+    }
+
+    /// The inserts the schedule asks for `samples` samples: the integral of
+    /// 1 / ratio over the samples taken.
+    pub fn inserts_for(&self, late: f64, samples: f64) -> f64 {
+        let (from, to) = (self.from as f64, self.to as f64);
+        let early_part = samples.min(from) / self.early;
+        if samples <= from {
+            return early_part;
+        }
+        let s = samples.min(to);
+        let slope = if to > from {
+            (late - self.early) / (to - from)
+        } else {
+            0.0
+        };
+        let ramp_part = if slope.abs() < 1e-12 {
+            (s - from) / self.early
+        } else {
+            (self.ratio_at(late, s) / self.early).ln() / slope
+        };
+        early_part + ramp_part + (samples - s).max(0.0) / late
+    }
 }
 
 /// Counts of inserts and samples, and the answers derived from them. Cost
@@ -52,6 +111,29 @@ impl RateLimiter {
         self.config
     }
 
+    /// The samples-per-insert ratio the limiter holds now (the ramp's
+    /// current value where there is one).
+    pub fn current_ratio(&self) -> f64 {
+        let c = &self.config;
+        match c.ramp {
+            Some(ramp) if c.samples_per_insert > 0.0 => {
+                ramp.ratio_at(c.samples_per_insert, self.samples as f64)
+            }
+            _ => c.samples_per_insert,
+        }
+    }
+
+    /// With a ramp: the gap in inserts, `inserts - I(samples)`, after
+    /// `extra_inserts` more inserts and `extra_samples` more samples, and
+    /// its bounds `min_size ± tolerance / r(samples)`.
+    fn ramp_gap(&self, ramp: &RatioRamp, extra_inserts: f64, extra_samples: f64) -> (f64, f64) {
+        let c = &self.config;
+        let r = c.samples_per_insert;
+        let gap = self.inserts as f64 + extra_inserts
+            - ramp.inserts_for(r, self.samples as f64 + extra_samples);
+        (gap, c.tolerance / self.current_ratio())
+    }
+
     fn bounds(&self) -> (f64, f64) {
         let c = &self.config;
         let centre = c.min_size_to_sample as f64 * c.samples_per_insert;
@@ -68,6 +150,10 @@ impl RateLimiter {
         if r == 0.0 || self.inserts < self.config.min_size_to_sample {
             return true;
         }
+        if let Some(ramp) = &self.config.ramp {
+            let (gap, tolerance) = self.ramp_gap(ramp, 1.0, 0.0);
+            return gap <= self.config.min_size_to_sample as f64 + tolerance;
+        }
         self.gap() + r <= self.bounds().1
     }
 
@@ -76,7 +162,14 @@ impl RateLimiter {
         if self.inserts < self.config.min_size_to_sample.max(1) {
             return false;
         }
-        self.config.samples_per_insert == 0.0 || self.gap() - 1.0 >= self.bounds().0
+        if self.config.samples_per_insert == 0.0 {
+            return true;
+        }
+        if let Some(ramp) = &self.config.ramp {
+            let (gap, tolerance) = self.ramp_gap(ramp, 0.0, 1.0);
+            return gap >= self.config.min_size_to_sample as f64 - tolerance;
+        }
+        self.gap() - 1.0 >= self.bounds().0
     }
 
     /// Records `n` inserted items.
@@ -125,7 +218,105 @@ mod tests {
             min_size_to_sample: min,
             samples_per_insert: r,
             tolerance: tol,
+            ramp: None,
         })
+    }
+
+    fn ramped(min: u64, early: f64, late: f64, from: u64, to: u64, tol: f64) -> RateLimiter {
+        RateLimiter::new(RateLimiterConfig {
+            min_size_to_sample: min,
+            samples_per_insert: late,
+            tolerance: tol,
+            ramp: Some(RatioRamp { early, from, to }),
+        })
+    }
+
+    /// Drives `l` greedily (sample whenever allowed, else insert) and
+    /// returns (inserts, samples) each time the samples pass a multiple of
+    /// `every`.
+    fn drive(l: &mut RateLimiter, until_samples: u64, every: u64) -> Vec<(u64, u64)> {
+        let mut seen = Vec::new();
+        let mut next = every;
+        while l.counts().1 < until_samples {
+            assert!(
+                l.can_insert() || l.can_sample(),
+                "deadlock at {:?}",
+                l.counts()
+            );
+            if l.can_sample() {
+                l.sampled(1);
+            } else {
+                l.inserted(1);
+            }
+            if l.counts().1 >= next {
+                seen.push(l.counts());
+                next += every;
+            }
+        }
+        seen
+    }
+
+    #[test]
+    fn a_ramp_holds_the_early_ratio_then_the_late_one() {
+        // 0.5 samples per insert for the first 1,000 samples, moving to 4
+        // by 3,000: fresh data early, reuse late.
+        let mut l = ramped(10, 0.5, 4.0, 1_000, 3_000, 8.0);
+        l.inserted(10);
+        let seen = drive(&mut l, 10_000, 500);
+        let ratio = |a: (u64, u64), b: (u64, u64)| (b.1 - a.1) as f64 / (b.0 - a.0) as f64;
+        // Samples 0-1,000 (after the first 500): inserts grow 2 per sample.
+        let early = ratio(seen[0], seen[1]);
+        assert!((early - 0.5).abs() < 0.01, "early ratio {early}");
+        // Past 3,000 samples: 4 samples per insert.
+        let late = ratio(seen[8], seen[19]);
+        assert!((late - 4.0).abs() < 0.05, "late ratio {late}");
+        // Inside the ramp the ratio lies between the two.
+        let mid = ratio(seen[2], seen[5]);
+        assert!(mid > 0.6 && mid < 3.9, "ramp ratio {mid}");
+        assert!((l.current_ratio() - 4.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_ramp_without_change_is_the_constant_ratio() {
+        let mut constant = limiter(5, 2.0, 4.0);
+        let mut ramp = ramped(5, 2.0, 2.0, 100, 200, 4.0);
+        constant.inserted(5);
+        ramp.inserted(5);
+        for step in 0..2_000u64 {
+            assert_eq!(constant.can_sample(), ramp.can_sample(), "step {step}");
+            assert_eq!(constant.can_insert(), ramp.can_insert(), "step {step}");
+            for l in [&mut constant, &mut ramp] {
+                if step % 2 == 0 && l.can_sample() {
+                    l.sampled(1);
+                } else if l.can_insert() {
+                    l.inserted(1);
+                } else {
+                    l.sampled(1);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn inserts_for_integrates_the_inverse_ratio() {
+        let ramp = RatioRamp {
+            early: 0.5,
+            from: 100,
+            to: 300,
+        };
+        // Numerical integral of 1 / r over 0..s against the closed form.
+        for s in [50.0, 100.0, 180.0, 300.0, 700.0] {
+            let n = 100_000;
+            let h = s / n as f64;
+            let numeric: f64 = (0..n)
+                .map(|i| h / ramp.ratio_at(4.0, (i as f64 + 0.5) * h))
+                .sum();
+            let closed = ramp.inserts_for(4.0, s);
+            assert!(
+                (numeric - closed).abs() < 1e-3,
+                "s {s}: {numeric} vs {closed}"
+            );
+        }
     }
 
     #[test]
@@ -161,8 +352,15 @@ mod tests {
 
     #[test]
     fn one_side_can_always_go() {
-        for (r, tol) in [(0.5, 1.0), (1.0, 1.0), (4.0, 4.0), (8.0, 20.0)] {
-            let mut l = limiter(5, r, tol);
+        let cases = [(0.5, 1.0), (1.0, 1.0), (4.0, 4.0), (8.0, 20.0)]
+            .into_iter()
+            .map(|(r, tol)| limiter(5, r, tol))
+            .chain([
+                ramped(5, 0.5, 4.0, 100, 2_000, 4.0),
+                ramped(5, 8.0, 0.25, 0, 500, 8.0),
+            ]);
+        for mut l in cases {
+            let (r, tol) = (l.config().samples_per_insert, l.config().tolerance);
             l.inserted(5);
             for step in 0..1000u64 {
                 assert!(l.can_insert() || l.can_sample(), "r {r} tol {tol}");

@@ -40,7 +40,7 @@ use crate::compact;
 use crate::metrics::TableMetrics;
 use crossroads_transport::grpc::{RateLimiterInfo, TableInfo};
 
-use crate::rate_limiter::{RateLimiter, RateLimiterConfig};
+use crate::rate_limiter::{RateLimiter, RateLimiterConfig, RatioRamp};
 use crate::storage::{ObservationStore, content_hash};
 use crate::sum_tree::SumTree;
 
@@ -77,6 +77,11 @@ impl TableConfig {
                 min_size_to_sample: c.min_size_to_sample,
                 samples_per_insert: c.samples_per_insert,
                 tolerance: c.rate_tolerance,
+                ramp: c.early_samples_per_insert.map(|early| RatioRamp {
+                    early,
+                    from: c.ratio_ramp[0],
+                    to: c.ratio_ramp[1],
+                }),
             },
         }
     }
@@ -534,7 +539,7 @@ impl Table {
             },
             limiter: RateLimiterInfo {
                 min_size_to_sample: limiter.min_size_to_sample,
-                samples_per_insert: limiter.samples_per_insert,
+                samples_per_insert: inner.limiter.current_ratio(),
                 error_tolerance: limiter.tolerance,
                 can_sample: inner.limiter.can_sample() && inner.size > 0,
                 can_insert: inner.limiter.can_insert(),
@@ -702,7 +707,7 @@ impl Table {
                             "{inserts} inserted, {samples} sampled, size {}, min size {}, {} samples per insert",
                             inner.size,
                             self.config.limiter.min_size_to_sample,
-                            self.config.limiter.samples_per_insert,
+                            inner.limiter.current_ratio(),
                         ),
                     });
                 }

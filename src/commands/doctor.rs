@@ -8,16 +8,25 @@
 //!
 //! With `--busy` it times the forward passes again beside another process
 //! spinning on a core (a shell loop), as on a loaded machine.
+//!
+//! It also says what CUDA it found (libtorch built with it, devices
+//! visible, cuDNN) and the device `runtime.device` resolves to for the
+//! learner; the learner's update is timed there, the forward passes on the
+//! CPU (actors and `doctor` itself never leave it). When `cuda` is asked
+//! for and cannot be met, the report names what is missing and `doctor`
+//! exits with status 1.
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use crossroads_config::{Config, ConfigLoader, SimConfig};
-use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second};
-use crossroads_model::{NativeMlp, NetworkSpec, Precision, QNetwork, Work, cpu_has_amx_bf16};
+use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second_on};
+use crossroads_model::{
+    CudaSupport, NativeMlp, NetworkSpec, Precision, QNetwork, Work, cpu_has_amx_bf16, device_name,
+};
 use serde::Serialize;
-use tch::Tensor;
+use tch::{Device, Tensor};
 
 use crate::cli::{DoctorArgs, GlobalArgs};
 
@@ -38,6 +47,22 @@ struct Report {
     /// (`runtime.learner_torch_threads`).
     learner_torch_threads: i32,
     cuda_available: bool,
+    /// The libtorch linked was built with CUDA (and its CUDA library
+    /// loaded).
+    libtorch_cuda: bool,
+    /// CUDA devices libtorch sees.
+    cuda_devices: i64,
+    /// cuDNN is available.
+    cudnn: bool,
+    /// `runtime.device` as configured: `auto`, `cpu` or `cuda`.
+    device_setting: &'static str,
+    /// The device the learner's networks go on (`cpu`, `cuda:0`), or
+    /// `unavailable` when `runtime.device = "cuda"` cannot be met.
+    learner_device: String,
+    /// Why the learner's device cannot be had, naming what is missing;
+    /// `doctor` then exits with status 1.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    learner_device_error: Option<String>,
     mkl: bool,
     openmp: bool,
     /// `OMP_WAIT_POLICY` as this process runs (the binary makes it
@@ -49,7 +74,8 @@ struct Report {
     /// The network timed, in one line (`dueling conv 2344-16-32-256 -> 5`).
     network: String,
     /// The number format the learner's updates compute the trunk in
-    /// (`runtime.precision` resolved for this network and CPU).
+    /// (`runtime.precision` resolved for this network, CPU and the
+    /// learner's device).
     learner_precision: &'static str,
     /// The number format of the actors' forward passes.
     actor_precision: &'static str,
@@ -70,7 +96,8 @@ struct Report {
     /// Median of timed forward passes (no gradient) at `learner_batch`.
     learner_forward_median_ms: f64,
     /// One update (forward, double DQN targets, backward, optimizer step)
-    /// at `learner_batch`, from the median of three rounds' rates.
+    /// at `learner_batch`, on `learner_device` (the CPU when it is
+    /// unavailable), from the median of three rounds' rates.
     learner_update_median_ms: f64,
     /// With `--busy`: the forward passes again beside a busy process.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -153,16 +180,22 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         (None, Some(file)) => file.display().to_string(),
         (None, None) => "built-in defaults".to_owned(),
     };
+    let cuda = CudaSupport::probe();
+    let learner_device = cuda.resolve(config.runtime.device);
+    // Timings where the learner would train; on the CPU when it cannot.
+    let device = learner_device.as_ref().map_or(Device::Cpu, |d| *d);
     let mut net = QNetwork::new(spec.clone(), learner.seed).context("building the network")?;
-    let choose = |work| Precision::choose(config.runtime.precision, &spec, work);
-    let (training, acting) = (choose(Work::Training), choose(Work::Acting));
+    let precision = config.runtime.precision;
+    let training = Precision::choose_on(precision, &spec, Work::Training, device);
+    let acting = Precision::choose(precision, &spec, Work::Acting);
     let actor_batch = config.actor.envs;
     let learner_batch = learner.batch_size;
     let learner_threads = threads_of(config.runtime.learner_torch_threads());
-    let update = updates_per_second(
+    let update = updates_per_second_on(
         &sim,
         learner,
-        config.runtime.precision,
+        precision,
+        device,
         3,
         Duration::from_millis(300),
     )
@@ -197,6 +230,14 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         torch_threads: actor_threads,
         learner_torch_threads: learner_threads,
         cuda_available: tch::Cuda::is_available(),
+        libtorch_cuda: cuda.built_with_cuda,
+        cuda_devices: cuda.devices,
+        cudnn: cuda.cudnn,
+        device_setting: config.runtime.device.name(),
+        learner_device: learner_device
+            .as_ref()
+            .map_or_else(|_| "unavailable".to_owned(), |d| device_name(*d)),
+        learner_device_error: learner_device.as_ref().err().map(ToString::to_string),
         mkl: tch::utils::has_mkl(),
         openmp: tch::utils::has_openmp(),
         openmp_wait_policy: std::env::var("OMP_WAIT_POLICY").unwrap_or_else(|_| "unset".into()),
@@ -224,6 +265,23 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
             report.torch_threads, report.learner_torch_threads
         );
         println!("  CUDA available   {}", report.cuda_available);
+        let yes = |b: bool| if b { "yes" } else { "no" };
+        println!(
+            "  CUDA             libtorch built with CUDA {}, {} device(s) visible, cuDNN {}",
+            yes(report.libtorch_cuda),
+            report.cuda_devices,
+            yes(report.cudnn)
+        );
+        match &report.learner_device_error {
+            None => println!(
+                "  learner device   {} (runtime.device {})",
+                report.learner_device, report.device_setting
+            ),
+            Some(e) => println!(
+                "  learner device   unavailable (runtime.device {}): {e}",
+                report.device_setting
+            ),
+        }
         println!("  MKL / OpenMP     {} / {}", report.mkl, report.openmp);
         println!(
             "  OpenMP waits     {} (OMP_WAIT_POLICY)",
@@ -256,8 +314,10 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
             report.learner_forward_median_ms, report.learner_batch
         );
         println!(
-            "  learner update   {:.3} ms median (batch {})",
-            report.learner_update_median_ms, report.learner_batch
+            "  learner update   {:.3} ms median (batch {}, {})",
+            report.learner_update_median_ms,
+            report.learner_batch,
+            device_name(device)
         );
         if let Some(b) = &report.busy {
             println!(
@@ -269,6 +329,11 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
                 b.learner_forward_ratio
             );
         }
+    }
+    if report.learner_device_error.is_some() {
+        // A failed check: the learner of this configuration would not
+        // start here.
+        return Ok(ExitCode::FAILURE);
     }
     Ok(ExitCode::SUCCESS)
 }

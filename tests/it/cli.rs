@@ -314,6 +314,46 @@ fn a_busy_core_does_not_collapse_the_forward_pass() {
     }
 }
 
+/// `doctor` says what CUDA it found and the device the learner would
+/// train on (`runtime.device`, `auto` by default); `cuda` where it cannot
+/// be had fails the check (status 1), naming what is missing.
+#[test]
+fn doctor_reports_the_learner_device_and_fails_a_cuda_it_cannot_have() {
+    let report = doctor_with(&[], &[]);
+    let devices = report["cuda_devices"].as_i64().expect("a count");
+    let cuda = report["libtorch_cuda"].as_bool().expect("a flag") && devices > 0;
+    assert!(report["cudnn"].is_boolean(), "{report}");
+    assert_eq!(report["device_setting"], "auto", "{report}");
+    assert_eq!(
+        report["learner_device"],
+        if cuda { "cuda:0" } else { "cpu" },
+        "{report}"
+    );
+    assert!(report.get("learner_device_error").is_none(), "{report}");
+    if cuda {
+        return;
+    }
+    let out = crossroads(&[
+        "--set",
+        "learner.trunk=mlp",
+        "--set",
+        "learner.hidden=[32]",
+        "--set",
+        "runtime.device=cuda",
+        "doctor",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_str(&stdout(&out)).expect("JSON");
+    assert_eq!(report["learner_device"], "unavailable", "{report}");
+    let error = report["learner_device_error"].as_str().expect("the reason");
+    assert!(
+        error.contains("runtime.device = \"cuda\"")
+            && (error.contains("built without CUDA") || error.contains("no CUDA device")),
+        "{error}"
+    );
+}
+
 /// A config file of the older schema still runs, with a warning per moved
 /// key on standard error; the effective configuration is the new schema.
 #[test]

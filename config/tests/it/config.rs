@@ -2,7 +2,9 @@
 
 use std::io::Write;
 
-use crossroads_config::{Config, ConfigError, ConfigLoader, LogFormat, PrecisionSetting};
+use crossroads_config::{
+    Config, ConfigError, ConfigLoader, DeviceSetting, LogFormat, PrecisionSetting,
+};
 
 fn toml_file(content: &str) -> tempfile::NamedTempFile {
     let mut f = tempfile::Builder::new()
@@ -101,6 +103,36 @@ fn precision_is_auto_unless_told_and_names_a_wrong_value() {
     assert!(err.contains("runtime.precision"), "{err}");
     assert_eq!("bf16".parse(), Ok(PrecisionSetting::Bf16));
     assert!("half".parse::<PrecisionSetting>().is_err());
+}
+
+#[test]
+fn device_is_auto_unless_told_and_names_a_wrong_value() {
+    let (_f, result) = load("");
+    let config = result.expect("empty file");
+    assert_eq!(config.runtime.device, DeviceSetting::Auto);
+    let (_f, result) = load("[runtime]\ndevice = \"cpu\"\n");
+    assert_eq!(result.expect("valid").runtime.device, DeviceSetting::Cpu);
+    let (_f, result) = load("[runtime]\ndevice = \"gpu\"\n");
+    let err = format!("{:#}", result.expect_err("no such device"));
+    assert!(err.contains("runtime.device"), "{err}");
+
+    // From the command line; validation is pure, so `cuda` loads and
+    // validates on a machine without one (the learner says so at start).
+    let config = ConfigLoader::new()
+        .without_env()
+        .sets(["runtime.device=cuda"])
+        .load()
+        .expect("valid");
+    assert_eq!(config.runtime.device, DeviceSetting::Cuda);
+    assert!(config.validate().is_empty());
+    assert!(config.to_toml().contains("device = \"cuda\""));
+
+    assert_eq!("cuda".parse(), Ok(DeviceSetting::Cuda));
+    assert_eq!("auto".parse(), Ok(DeviceSetting::Auto));
+    assert!("gpu".parse::<DeviceSetting>().is_err());
+    for d in [DeviceSetting::Auto, DeviceSetting::Cpu, DeviceSetting::Cuda] {
+        assert_eq!(d.name().parse(), Ok(d));
+    }
 }
 
 #[test]
@@ -488,4 +520,71 @@ fn security_settings_are_checked_when_the_config_loads() {
         .expect("valid");
     assert!(config.transport.tls.serves_tls());
     assert!(!config.to_toml().contains("api_token"));
+}
+
+#[test]
+fn early_phases_of_the_replay_ratio_and_the_learner_are_checked() {
+    let config = ConfigLoader::new()
+        .without_env()
+        .sets([
+            "replay.samples_per_insert=4.0",
+            "replay.rate_tolerance=20000.0",
+            "replay.early_samples_per_insert=0.25",
+            "replay.ratio_ramp=[192000,640000]",
+            "learner.early_updates=3000",
+            "learner.early_learning_rate=0.001",
+            "learner.early_target_period=250",
+        ])
+        .load()
+        .expect("an early phase");
+    assert_eq!(config.replay.early_samples_per_insert, Some(0.25));
+    assert_eq!(config.replay.ratio_ramp, [192_000, 640_000]);
+    assert_eq!(config.learner.early_learning_rate, Some(0.001));
+    assert_eq!(config.learner.early_target_period, Some(250));
+
+    let err = ConfigLoader::new()
+        .without_env()
+        .sets([
+            "replay.samples_per_insert=0.0",
+            "replay.early_samples_per_insert=-1.0",
+            "replay.ratio_ramp=[10,5]",
+            "learner.early_learning_rate=0.0",
+            "learner.early_target_period=0",
+        ])
+        .load()
+        .expect_err("out of range");
+    let p = problems(&err);
+    for (key, says) in [
+        ("replay.early_samples_per_insert", "above 0"),
+        (
+            "replay.early_samples_per_insert",
+            "needs replay.samples_per_insert",
+        ),
+        ("replay.ratio_ramp", "from at most to"),
+        ("learner.early_learning_rate", "above 0"),
+        ("learner.early_target_period", "at least 1"),
+    ] {
+        assert!(
+            p.iter().any(|(_, k, m)| k == key && m.contains(says)),
+            "{key}: {says} missing from {p:?}"
+        );
+    }
+
+    // The tolerance must cover the early ratio too.
+    let err = ConfigLoader::new()
+        .without_env()
+        .sets([
+            "replay.samples_per_insert=1.0",
+            "replay.rate_tolerance=2.0",
+            "replay.early_samples_per_insert=8.0",
+        ])
+        .load()
+        .expect_err("tolerance below the early ratio");
+    assert!(
+        problems(&err)
+            .iter()
+            .any(|(_, k, _)| k == "replay.rate_tolerance"),
+        "{:?}",
+        problems(&err)
+    );
 }

@@ -6,7 +6,8 @@
 //! `with_slices` holds the workspace's one `#[allow(unsafe_code)]`
 //! outside build scripts: it makes slices only of dense, contiguous f32 CPU
 //! tensors of one size whose memory does not overlap, and refuses anything
-//! else (so training needs its tensors on the CPU).
+//! else (parameters off the CPU take the optimizer's tensor-operation step
+//! instead, `Optimizer::step`).
 
 use tch::{Device, Kind, Tensor};
 

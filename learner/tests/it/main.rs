@@ -1,8 +1,10 @@
 //! Integration tests of the learner: the update's arithmetic, learning a
-//! known MDP, checkpoints and exact resume, and the gRPC service over a real
-//! loopback socket against a real replay server.
+//! known MDP, checkpoints and exact resume, the gRPC service over a real
+//! loopback socket against a real replay server, and the learner's device
+//! (`runtime.device`).
 
 mod checkpoints;
+mod device;
 mod python;
 mod server;
 mod training;

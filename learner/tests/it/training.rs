@@ -467,3 +467,59 @@ fn the_default_loss_learns_the_mean_return_of_a_risky_go() {
     }
     assert_delta_1_prefers_a_risky_go();
 }
+
+/// The early phase (`learner.early_*`): its learning rate and target
+/// period for the first updates, the configured ones after, chosen by the
+/// trainer's step.
+#[test]
+fn an_early_phase_takes_its_own_learning_rate_and_target_period() {
+    let spec = toy_spec(3, 2, vec![8]);
+    let chain = Chain::new();
+    let batch = chain.batch(&spec);
+    let adam = OptimizerConfig::Adam {
+        lr: 1e-4,
+        beta1: 0.9,
+        beta2: 0.999,
+        eps: 1e-8,
+    };
+    let mut t = trainer(spec.clone(), adam, TargetUpdate::Period);
+    t.set_early_phase(Some(crossroads_learner::EarlyPhase {
+        updates: 10,
+        learning_rate: 1e-2,
+        target_period: 3,
+    }));
+    let state = Tensor::eye(3, (Kind::Float, tch::Device::Cpu));
+    let target_q = |t: &Trainer| values(&t.target().q_values(&state).expect("forward"));
+    let online_q = |t: &Trainer| values(&t.online().q_values(&state).expect("forward"));
+    let mut copies = Vec::new();
+    let mut learning_rates = Vec::new();
+    for _ in 0..30 {
+        let before = target_q(&t);
+        t.update(&batch).expect("update");
+        learning_rates.push(t.optimizer().config().learning_rate());
+        if target_q(&t) != before {
+            assert_eq!(target_q(&t), online_q(&t), "a target update is a copy");
+            copies.push(t.step());
+        }
+    }
+    // Every 3 updates in the first 10, then every 25 (the trainer's own).
+    assert_eq!(
+        copies,
+        vec![3, 6, 9, 25],
+        "target copies after these updates"
+    );
+    assert!(
+        learning_rates[..10].iter().all(|&lr| lr == 1e-2),
+        "{learning_rates:?}"
+    );
+    assert!(
+        learning_rates[10..].iter().all(|&lr| lr == 1e-4),
+        "{learning_rates:?}"
+    );
+
+    // Without the phase: the configured settings throughout.
+    let mut plain = trainer(spec, adam, TargetUpdate::Period);
+    plain.set_early_phase(None);
+    plain.update(&batch).expect("update");
+    assert_eq!(plain.optimizer().config().learning_rate(), 1e-4);
+}

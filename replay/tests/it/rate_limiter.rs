@@ -16,6 +16,7 @@ fn limited(min: u64, ratio: f64, tolerance: f64) -> Arc<Table> {
         min_size_to_sample: min,
         samples_per_insert: ratio,
         tolerance,
+        ramp: None,
     };
     Arc::new(Table::new(c, TableMetrics::unregistered("t")))
 }

@@ -29,6 +29,7 @@ pub fn table_config(capacity: usize, alpha: f64) -> TableConfig {
             min_size_to_sample: 1,
             samples_per_insert: 0.0,
             tolerance: 0.0,
+            ramp: None,
         },
     }
 }
