@@ -390,6 +390,9 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
     for path in written {
         eprintln!("wrote {}", path.display());
     }
+    if !results.runs.is_empty() {
+        eprintln!("{}", report::training_time(&results));
+    }
     Ok(ExitCode::SUCCESS)
 }
 

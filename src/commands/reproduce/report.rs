@@ -673,7 +673,30 @@ fn training_md(w: &mut String, r: &Results) {
                 .join(", ")
         );
     }
+    let _ = writeln!(w, "\n{}", training_time(r));
     let _ = writeln!(w, "\n![Learning curves](curves.png)\n");
+}
+
+/// The training time of the report's networks: the sum of their runs'
+/// wall times (each on the machine its summary names), and the part this
+/// call trained.
+pub(super) fn training_time(r: &Results) -> String {
+    let total: f64 = r.runs.iter().map(|run| run.summary.wall_seconds).sum();
+    let this_call: f64 = r
+        .runs
+        .iter()
+        .filter(|run| r.trained.contains(&run.experiment))
+        .map(|run| run.summary.wall_seconds)
+        .sum();
+    format!(
+        "Training time of the {} runs: {:.1} hours in all ({:.0} minutes), {:.0} minutes of it \
+         trained by this call ({} of the runs).",
+        r.runs.len(),
+        total / 3600.0,
+        total / 60.0,
+        this_call / 60.0,
+        r.trained.len()
+    )
 }
 
 /// Figure 3: per scenario, TTC's collision rate against its mean time over
@@ -739,4 +762,33 @@ fn fig3(path: &Path, r: &Results) -> anyhow::Result<()> {
         2,
         &panels,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::commands::reproduce::RunRecord;
+    use crate::commands::train::record::Summary;
+
+    #[test]
+    fn the_training_time_sums_every_run_and_names_this_calls_part() {
+        let run = |name: &str, seconds: f64| RunRecord {
+            experiment: name.to_owned(),
+            summary: Summary {
+                wall_seconds: seconds,
+                ..Summary::default()
+            },
+            curve: Vec::new(),
+        };
+        let r = Results {
+            runs: vec![run("ttg-left", 2_400.0), run("ttg-right", 5_400.0)],
+            trained: vec!["ttg-right".to_owned()],
+            ..Results::default()
+        };
+        assert_eq!(
+            training_time(&r),
+            "Training time of the 2 runs: 2.2 hours in all (130 minutes), 90 minutes of it \
+             trained by this call (1 of the runs)."
+        );
+    }
 }
