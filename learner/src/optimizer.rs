@@ -122,6 +122,16 @@ impl std::fmt::Debug for Optimizer {
     }
 }
 
+/// The factor that scales a gradient of global norm `total` down to
+/// `max_norm` (1 when it is within it or clipping is off).
+fn clip_scale(total: f64, max_norm: f64) -> f32 {
+    if max_norm > 0.0 && total > max_norm {
+        (max_norm / (total + 1e-6)) as f32
+    } else {
+        1.0
+    }
+}
+
 impl Optimizer {
     /// An optimizer of `params` (name, variable; the variables are updated
     /// in place), with zero state on the parameters' device. Parameters
@@ -240,11 +250,7 @@ impl Optimizer {
             .iter()
             .sum::<f64>()
             .sqrt();
-        let scale = if max_norm > 0.0 && total > max_norm {
-            (max_norm / (total + 1e-6)) as f32
-        } else {
-            1.0
-        };
+        let scale = clip_scale(total, max_norm);
         self.steps += 1;
         let rule = fused::Rule::new(self.config, self.steps);
         for (p, g) in self.params.iter_mut().zip(&grads) {
@@ -277,11 +283,7 @@ impl Optimizer {
                 .double_value(&[])
                 .sqrt()
         };
-        let scale = if max_norm > 0.0 && total > max_norm {
-            (max_norm / (total + 1e-6)) as f32
-        } else {
-            1.0
-        };
+        let scale = clip_scale(total, max_norm);
         self.steps += 1;
         let rule = fused::Rule::new(self.config, self.steps);
         tch::no_grad(|| {

@@ -662,18 +662,7 @@ fn a_network_on_the_cpu_device_is_the_plain_one() {
     assert_eq!(on_cpu.device(), Device::Cpu);
     assert_eq!(plain.device(), Device::Cpu);
     // Variable by variable: the bytes' header follows a hash map's order.
-    let named = |n: &QNetwork| -> Vec<(String, Vec<f32>)> {
-        n.parameters()
-            .into_iter()
-            .map(|(name, t)| {
-                (
-                    name,
-                    Vec::<f32>::try_from(t.detach().flatten(0, -1)).expect("values"),
-                )
-            })
-            .collect()
-    };
-    assert_eq!(named(&on_cpu), named(&plain));
+    assert_eq!(variables(&on_cpu), variables(&plain));
     let rows = 4;
     let values = sparse_rows(23, rows);
     let sparse = Observations::new(on_cpu.spec(), &values, rows);
@@ -768,16 +757,20 @@ fn a_network_on_cuda_computes_what_the_cpu_one_does() {
         assert_eq!(gpu_net.device(), cuda);
         // Variable by variable: the bytes' header follows a hash map's order.
         let (back, _) = QNetwork::from_safetensors(&gpu_net.to_safetensors(3).unwrap()).unwrap();
-        let named = |n: &QNetwork| -> Vec<(String, Vec<f32>)> {
-            n.parameters()
-                .into_iter()
-                .map(|(name, t)| {
-                    let v = Vec::<f32>::try_from(t.detach().to_device(Device::Cpu).flatten(0, -1))
-                        .expect("values");
-                    (name, v)
-                })
-                .collect()
-        };
-        assert_eq!(named(&back), named(&other));
+        assert_eq!(variables(&back), variables(&other));
     }
+}
+
+/// Every variable of `n` by name, its values on the CPU: what two networks
+/// are compared by (the safetensors header follows a hash map's order, so
+/// equal weights need not give equal bytes).
+fn variables(n: &QNetwork) -> Vec<(String, Vec<f32>)> {
+    n.parameters()
+        .into_iter()
+        .map(|(name, t)| {
+            let v = Vec::<f32>::try_from(t.detach().to_device(Device::Cpu).flatten(0, -1))
+                .expect("values");
+            (name, v)
+        })
+        .collect()
 }

@@ -66,6 +66,15 @@ fn batches(spec: &NetworkSpec, n: usize) -> Vec<TrainingBatch> {
         .collect()
 }
 
+/// Every variable of `n` by name, with its values: what two networks are
+/// compared by (the safetensors header follows a hash map's order).
+fn variables(n: &QNetwork) -> Vec<(String, Vec<f32>)> {
+    n.parameters()
+        .into_iter()
+        .map(|(name, t)| (name, values(&t.detach())))
+        .collect()
+}
+
 fn values(t: &Tensor) -> Vec<f32> {
     Vec::try_from(t.to_device(Device::Cpu).flatten(0, -1).to_kind(Kind::Float)).expect("values")
 }
@@ -185,16 +194,8 @@ fn a_trainer_on_the_cpu_device_is_the_plain_one() {
         let c = on_cpu.update(&b.to_device(Device::Cpu)).unwrap();
         assert_eq!(bits(&a), bits(&c));
     }
-    // Variable by variable (the safetensors bytes follow each store's own
-    // order of its variables).
-    let named = |t: &Trainer| -> Vec<(String, Vec<f32>)> {
-        t.online()
-            .parameters()
-            .into_iter()
-            .map(|(name, v)| (name, values(&v.detach())))
-            .collect()
-    };
-    assert_eq!(named(&plain), named(&on_cpu));
+    // Variable by variable: the bytes' header follows a hash map's order.
+    assert_eq!(variables(plain.online()), variables(on_cpu.online()));
 }
 
 /// Whether a CUDA device is here to test on. Without one the test says why
@@ -319,13 +320,7 @@ fn a_cuda_trainer_follows_the_cpu_one_and_its_weights_load_on_the_cpu() {
             assert_eq!(resumed.step(), gpu.step());
             // Variable by variable: the bytes' header follows a hash map's order.
             let (saved, _) = QNetwork::from_safetensors(&bytes).unwrap();
-            let named = |n: &QNetwork| -> Vec<(String, Vec<f32>)> {
-                n.parameters()
-                    .into_iter()
-                    .map(|(name, t)| (name, values(&t.detach())))
-                    .collect()
-            };
-            assert_eq!(named(resumed.online()), named(&saved));
+            assert_eq!(variables(resumed.online()), variables(&saved));
             let more = batches(&spec, 5);
             let a = resumed.update(&more[4]).unwrap();
             let g = gpu.update(&more[4]).unwrap();
