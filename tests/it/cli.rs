@@ -185,7 +185,7 @@ fn doctor_times_the_network_a_run_would_train() {
         "{report}"
     );
     // Without a file: what `crossroads train` trains by default, the
-    // built-in ttg-left (conv trunk over the TTG grid, 16 environments per
+    // built-in ttg-left (conv trunk over the TTG grid, 64 environments per
     // actor, batches of 64).
     assert_eq!(report["config"], "built-in experiment ttg-left", "{report}");
     assert_eq!(
@@ -197,7 +197,7 @@ fn doctor_times_the_network_a_run_would_train() {
             report["actor_batch"].as_u64(),
             report["learner_batch"].as_u64()
         ),
-        (Some(16), Some(64)),
+        (Some(64), Some(64)),
         "{report}"
     );
     for key in [

@@ -299,10 +299,10 @@ fn markdown(plan: &Plan, r: &Results) -> String {
     if plan.wants(Part::Drivers) {
         let _ = writeln!(
             w,
-            "## Safety across drivers
-
-             Every Table I scenario against the drivers' reaction time and the share of              inattentive drivers, for TTC tuned for human drivers, DQN-TTG, DQN-TTG behind              the shield and the shield alone: [drivers/README.md](drivers/README.md).
-"
+            "## Safety across drivers\n\n\
+             Every Table I scenario against the drivers' reaction time and the share of \
+             inattentive drivers, for TTC tuned for human drivers, DQN-TTG, DQN-TTG behind \
+             the shield and the shield alone: [drivers/README.md](drivers/README.md).\n"
         );
     }
     shortfalls_md(w, r);
@@ -687,7 +687,8 @@ pub(super) fn training_time(r: &Results) -> String {
         .iter()
         .filter(|run| r.trained.contains(&run.experiment))
         .map(|run| run.summary.wall_seconds)
-        .sum();
+        // Not `sum`: an empty f64 sum is -0.0, printed "-0".
+        .fold(0.0, |a, b| a + b);
     format!(
         "Training time of the {} runs: {:.1} hours in all ({:.0} minutes), {:.0} minutes of it \
          trained by this call ({} of the runs).",
@@ -789,6 +790,17 @@ mod tests {
             training_time(&r),
             "Training time of the 2 runs: 2.2 hours in all (130 minutes), 90 minutes of it \
              trained by this call (1 of the runs)."
+        );
+        // Every run reused: zero minutes, not "-0".
+        let reused = Results {
+            trained: Vec::new(),
+            ..r
+        };
+        assert!(
+            training_time(&reused)
+                .contains(", 0 minutes of it trained by this call (0 of the runs)"),
+            "{}",
+            training_time(&reused)
         );
     }
 }
