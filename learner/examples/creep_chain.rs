@@ -15,9 +15,22 @@
 //! The best policy creeps to the line and goes when it sees the crossing
 //! clear; the trap is waiting.
 //!
+//! `--cars K` hides the clear moment in a picture, as the grid of the
+//! occlusion family does: the crossing holds K cars, each at a distance
+//! drawn anew every step (uniform in 0..1), and it is clear when every car
+//! is farther than a threshold set so that it is clear with probability
+//! `--clear`. At the line the observation shows the K distances (zeros
+//! before it); the network must learn the conjunction from the rare
+//! exploring *go*s that succeed.
+//!
 //! ```text
 //! cargo run --release -p crossroads-learner --example creep_chain -- \
 //!     --ratio 0.5 --updates 20000 --seeds 1,2,3
+//! ```
+//!
+//! ```text
+//! cargo run --release -p crossroads-learner --example creep_chain -- \
+//!     --cars 4 --ratio 0.5 --updates 20000 --seeds 1,2,3
 //! ```
 //!
 //! Prints, every `--every` updates, the greedy policy's success, collision
@@ -64,6 +77,11 @@ struct Options {
     /// Priorities of new items: the acting network's TD error (Ape-X) or
     /// the largest priority seen (the PER paper).
     max_priority: bool,
+    /// Cars of the crossing whose distances the line shows (0: a plain
+    /// clear bit).
+    cars: usize,
+    /// The loss's Huber delta (the project's default: 20).
+    huber: f64,
 }
 
 impl Default for Options {
@@ -88,6 +106,8 @@ impl Default for Options {
             hidden: vec![64, 64],
             seeds: vec![1],
             max_priority: false,
+            cars: 0,
+            huber: 20.0,
         }
     }
 }
@@ -132,6 +152,8 @@ fn parse() -> Options {
             "lr" => num!(o.lr),
             "target-period" => num!(o.target_period),
             "sync-every" => num!(o.sync_every),
+            "cars" => num!(o.cars),
+            "huber" => num!(o.huber),
             "hidden" => {
                 o.hidden = value
                     .split(',')
@@ -180,6 +202,9 @@ impl Rng {
 struct Chain {
     position: usize,
     clear: bool,
+    /// The cars' distances (with `--cars`), clear when all exceed
+    /// [`Options::threshold`].
+    cars: Vec<f32>,
     t: u32,
 }
 
@@ -191,21 +216,54 @@ enum End {
     Timeout,
 }
 
+impl Options {
+    /// The distance every car must exceed for the crossing to be clear
+    /// with probability `clear`: `(1 - threshold)^cars = clear`.
+    fn threshold(&self) -> f64 {
+        1.0 - self.clear.powf(1.0 / self.cars as f64)
+    }
+
+    /// Width of an observation: the one-hot position, then the crossing.
+    fn width(&self) -> usize {
+        self.positions + 1 + self.cars.max(1)
+    }
+}
+
 impl Chain {
     fn new(rng: &mut Rng, o: &Options) -> Self {
-        Self {
+        let mut env = Self {
             position: 0,
-            clear: rng.uniform() < o.clear,
+            clear: false,
+            cars: vec![0.0; o.cars],
             t: 0,
+        };
+        env.draw(rng, o);
+        env
+    }
+
+    /// The crossing's traffic for this step.
+    fn draw(&mut self, rng: &mut Rng, o: &Options) {
+        if o.cars == 0 {
+            self.clear = rng.uniform() < o.clear;
+        } else {
+            for d in &mut self.cars {
+                *d = rng.uniform() as f32;
+            }
+            let threshold = o.threshold() as f32;
+            self.clear = self.cars.iter().all(|&d| d > threshold);
         }
     }
 
     /// One-hot position, then the crossing's state where it is seen.
     fn observation(&self, o: &Options) -> Vec<f32> {
-        let mut x = vec![0.0; o.positions + 2];
+        let mut x = vec![0.0; o.width()];
         x[self.position] = 1.0;
-        if self.position == o.positions && self.clear {
-            x[o.positions + 1] = 1.0;
+        if self.position == o.positions {
+            if o.cars == 0 {
+                x[o.positions + 1] = f32::from(u8::from(self.clear));
+            } else {
+                x[o.positions + 1..].copy_from_slice(&self.cars);
+            }
         }
         x
     }
@@ -222,7 +280,7 @@ impl Chain {
             self.position = (self.position + 1).min(o.positions);
         }
         self.t += 1;
-        self.clear = rng.uniform() < o.clear;
+        self.draw(rng, o);
         if self.t >= o.steps {
             (STEP_REWARD, Some(End::Timeout))
         } else {
@@ -237,7 +295,7 @@ fn spec(o: &Options) -> NetworkSpec {
             kind: "toy".to_owned(),
             channels: 1,
             rows: 1,
-            cols: (o.positions + 2) as i64,
+            cols: o.width() as i64,
             extra: 0,
         },
         action_set: "toy".to_owned(),
@@ -346,10 +404,22 @@ fn evaluate(net: &QNetwork, o: &Options, episodes: usize, seed: u64) -> ([f64; 3
             }
         }
     }
-    let line = |clear| {
+    // With cars: every car midway past the threshold (clear), or the
+    // first one midway before it (blocked).
+    let line = |clear: bool| {
+        let threshold = if o.cars == 0 {
+            0.0
+        } else {
+            o.threshold() as f32
+        };
+        let mut cars = vec![(1.0 + threshold) / 2.0; o.cars];
+        if !clear && let Some(first) = cars.first_mut() {
+            *first = threshold / 2.0;
+        }
         Chain {
             position: o.positions,
             clear,
+            cars,
             t: 0,
         }
         .observation(o)
@@ -381,7 +451,7 @@ fn run(o: &Options, seed: u64) {
             eps: 1.5e-4,
         },
         max_grad_norm: 40.0,
-        huber_delta: 20.0,
+        huber_delta: o.huber,
         target_update: TargetUpdate::Period,
         target_period: o.target_period,
         target_tau: 0.005,
