@@ -498,4 +498,29 @@ fn bench_time_to_target_trains_each_seed_and_reports_medians() {
     let bad = crossroads(&["bench", "time-to-target", "--minutes", "0"]);
     assert!(!bad.status.success());
     assert!(stderr(&bad).contains("--minutes"), "{}", stderr(&bad));
+
+    // An experiment with no target (ttg-occluded) is refused before any
+    // training, naming the key.
+    let scratch = tempfile::tempdir().expect("temp dir");
+    let runs = scratch.path().join("runs");
+    let bad = crossroads(&[
+        "--experiment",
+        "ttg-occluded",
+        "bench",
+        "time-to-target",
+        "--seeds",
+        "1",
+        "--minutes",
+        "5",
+        "--out",
+        runs.to_str().expect("utf-8"),
+    ]);
+    assert!(!bad.status.success());
+    let err = stderr(&bad);
+    assert!(
+        err.contains("experiment ttg-occluded sets no target")
+            && err.contains("train.target_success"),
+        "{err}"
+    );
+    assert!(!runs.join("seed-1").exists(), "it trained first");
 }

@@ -132,6 +132,30 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
         "--minutes: {} is not a positive number of minutes",
         o.minutes
     );
+    let what = match (&global.experiment, &global.config) {
+        (Some(e), _) => format!("experiment {e}"),
+        (None, Some(file)) => file.display().to_string(),
+        (None, None) => format!("experiment {DEFAULT_EXPERIMENT}"),
+    };
+    // What each child will train, checked here: without a target a seed
+    // would train its whole budget for nothing.
+    let loader = match (&global.experiment, &global.config) {
+        (None, None) => {
+            let e = crate::experiments::named(DEFAULT_EXPERIMENT)
+                .context("the default experiment is built in")?;
+            crossroads_config::ConfigLoader::new()
+                .base(format!("built-in experiment {}", e.name), e.toml)
+                .sets(global.sets.iter().cloned())
+        }
+        _ => global.loader(),
+    };
+    let config = loader.load().context("loading the configuration")?;
+    anyhow::ensure!(
+        config.train.target_success > 0.0,
+        "{what} sets no target (train.target_success = 0), so there is no time to it to \
+         measure: give one with --set train.target_success=... (and train.target_collision, \
+         train.target_time_s), as configs/experiments/ttg-left.toml does"
+    );
     let scratch;
     let root = match &o.out {
         Some(dir) => dir.clone(),
@@ -139,11 +163,6 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
             scratch = tempfile::tempdir().context("creating a temporary folder")?;
             scratch.path().to_path_buf()
         }
-    };
-    let what = match (&global.experiment, &global.config) {
-        (Some(e), _) => format!("experiment {e}"),
-        (None, Some(file)) => file.display().to_string(),
-        (None, None) => format!("experiment {DEFAULT_EXPERIMENT}"),
     };
     let machine = crate::commands::train::session::machine();
     let load = super::load_average();
