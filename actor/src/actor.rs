@@ -15,10 +15,13 @@ use std::sync::Arc;
 use crossroads_common::Shutdown;
 use crossroads_common::retry::Backoff;
 use crossroads_config::{ActorConfig, SimConfig, TransportConfig};
-use crossroads_sim::{ActionSet, EnvConfig, Scenario, episode_seed, splitmix64};
+use crossroads_sim::{
+    ActionSet, EnvConfig, Policy, PolicyRng, PolicySpec, Scenario, episode_seed, splitmix64,
+};
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;
 use crossroads_types::codec::ObservationEncoding;
+use rand::SeedableRng;
 
 use crate::error::ActorError;
 use crate::exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode};
@@ -26,7 +29,7 @@ use crate::metrics::ActorMetrics;
 use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
 use crate::push::Pusher;
 use crate::stats::EpisodeStats;
-use crate::values::ActionValues;
+use crate::values::{ActionValues, argmax};
 use crate::vec_env::{EpisodeEnd, VecEnv};
 
 /// Everything an [`Actor`] needs, resolved from the config.
@@ -61,6 +64,65 @@ pub struct ActorSettings {
     /// Act on the environments in two lanes, one lane's forward pass
     /// beside the other's simulation step (see [`Actor`]).
     pub pipeline: bool,
+    /// Environments that follow a rule early in training
+    /// (`actor.early_demo_envs`); `None` when none do or when evaluating.
+    pub demonstrations: Option<Demonstrations>,
+}
+
+/// Demonstrations (`actor.early_demo_envs`, `actor.demo_policy`,
+/// `actor.early_demo_steps`): environments `first..` of the actor follow
+/// `policy` instead of the network during the actor's first `steps` steps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Demonstrations {
+    /// The rule.
+    pub policy: PolicySpec,
+    /// The first demonstrating environment; every one after it demonstrates.
+    pub first: usize,
+    /// Steps of the actor during which they do.
+    pub steps: u64,
+}
+
+impl Demonstrations {
+    /// From `[actor]`, for `action_set`: `None` when no environment
+    /// demonstrates; an error naming the key when the rule cannot be read
+    /// or cannot drive the action set.
+    fn from_config(
+        config: &ActorConfig,
+        action_set: ActionSet,
+    ) -> Result<Option<Self>, ActorError> {
+        let envs = config.envs.max(1);
+        if config.eval || config.early_demo_envs == 0 {
+            return Ok(None);
+        }
+        let text = config.demo_policy.as_deref().ok_or_else(|| {
+            ActorError::Config(
+                "actor.demo_policy is needed when actor.early_demo_envs is set".to_owned(),
+            )
+        })?;
+        let policy: PolicySpec = text
+            .parse()
+            .map_err(|e| ActorError::Config(format!("actor.demo_policy: {e}")))?;
+        if matches!(policy, PolicySpec::Random | PolicySpec::Never) {
+            return Err(ActorError::Config(format!(
+                "actor.demo_policy: {text} demonstrates nothing; use ttc:<seconds> or ttc-creep:<seconds>"
+            )));
+        }
+        policy
+            .build()
+            .supports(action_set)
+            .map_err(|e| ActorError::Config(format!("actor.demo_policy: {e}")))?;
+        if config.early_demo_envs > envs {
+            return Err(ActorError::Config(format!(
+                "actor.early_demo_envs {} is above actor.envs {envs}",
+                config.early_demo_envs
+            )));
+        }
+        Ok(Some(Self {
+            policy,
+            first: envs - config.early_demo_envs,
+            steps: config.early_demo_steps,
+        }))
+    }
 }
 
 /// `[sim]`'s scenario, compiled, and its action set.
@@ -125,6 +187,7 @@ impl ActorSettings {
                 ),
             }
         };
+        let demonstrations = Demonstrations::from_config(config, action_set)?;
         Ok(Self {
             scenario,
             action_set,
@@ -140,6 +203,7 @@ impl ActorSettings {
             explore_go_once: config.explore_go_once,
             cut_at_exploration: config.cut_at_exploration,
             pipeline: config.pipeline,
+            demonstrations,
         })
     }
 }
@@ -273,6 +337,8 @@ pub struct Actor {
     metrics: ActorMetrics,
     /// Greedy episodes since the last evaluation summary in the log.
     eval_tally: (std::time::Instant, EpisodeStats),
+    /// Steps taken, for the demonstrations' end.
+    steps: u64,
 }
 
 /// A contiguous range of an actor's environments and everything kept per
@@ -294,6 +360,17 @@ struct Lane {
     /// lanes hand out the same one.
     next_obs_id: u64,
     id_stride: u64,
+    /// This lane's demonstrating environments, if any.
+    demo: Option<LaneDemo>,
+}
+
+/// The rule a lane's demonstrating environments follow, which of them
+/// (indices in the lane) and one random stream each.
+#[derive(Debug)]
+struct LaneDemo {
+    policy: Box<dyn Policy>,
+    envs: Range<usize>,
+    rngs: Vec<PolicyRng>,
 }
 
 /// How often an evaluating actor logs its running outcome rates.
@@ -331,6 +408,7 @@ impl Actor {
             ready: VecDeque::new(),
             metrics,
             eval_tally: (std::time::Instant::now(), EpisodeStats::default()),
+            steps: 0,
             settings,
         })
     }
@@ -378,6 +456,28 @@ impl Actor {
         }
         let training = self.settings.mode.is_training();
         let cut = training && self.settings.cut_at_exploration;
+        let demonstrating = training
+            && self
+                .settings
+                .demonstrations
+                .is_some_and(|d| self.steps < d.steps);
+        self.steps += 1;
+        if demonstrating
+            && let Some(d) = self.settings.demonstrations
+            && self.steps == d.steps
+        {
+            tracing::info!(
+                policy = %d.policy,
+                environments = self.settings.envs - d.first,
+                steps = d.steps,
+                "demonstrations end; every environment explores from now on"
+            );
+        }
+        let how = Decide {
+            training,
+            cut,
+            demonstrating,
+        };
         let mut done = Recorded {
             training,
             mode: if training { "train" } else { "eval" },
@@ -388,25 +488,25 @@ impl Actor {
         };
         match self.lanes.as_mut_slice() {
             [lane] => {
-                lane.decide(values, training, cut)?;
+                lane.decide(values, how)?;
                 lane.apply()?;
                 lane.record(&mut done);
             }
             [first, second] => {
                 if !second.decided {
-                    second.decide(values, training, cut)?;
+                    second.decide(values, how)?;
                 }
                 let mut stepped = Ok(());
                 rayon::in_place_scope(|s| {
                     s.spawn(|_| stepped = second.apply());
-                    first.decide(values, training, cut)
+                    first.decide(values, how)
                 })?;
                 stepped?;
                 let mut stepped = Ok(());
                 rayon::in_place_scope(|s| {
                     s.spawn(|_| stepped = first.apply());
                     second.record(&mut done);
-                    second.decide(values, training, cut)
+                    second.decide(values, how)
                 })?;
                 stepped?;
                 first.record(&mut done);
@@ -521,6 +621,15 @@ impl Actor {
     }
 }
 
+/// How a step's decisions are taken: training (n-step windows), cutting
+/// windows before exploratory actions, with demonstrations.
+#[derive(Debug, Clone, Copy)]
+struct Decide {
+    training: bool,
+    cut: bool,
+    demonstrating: bool,
+}
+
 /// Where a lane's finished steps are counted: the step's summary, the
 /// episode metrics, the evaluation tally.
 struct Recorded<'a> {
@@ -549,7 +658,7 @@ impl Lane {
             settings.seed,
             training.then_some(ObservationEncoding::SparseF32),
         )?;
-        let mut explorer = EpsilonGreedy::for_range(settings.mode, range, settings.seed);
+        let mut explorer = EpsilonGreedy::for_range(settings.mode, range.clone(), settings.seed);
         if let Some(action) = settings
             .action_set
             .absorbing_go()
@@ -561,6 +670,19 @@ impl Lane {
             });
         }
         let m = envs.len();
+        let demo = settings.demonstrations.and_then(|d| {
+            let envs = d.first.max(range.start)..range.end;
+            (!envs.is_empty()).then(|| LaneDemo {
+                policy: d.policy.build(),
+                rngs: envs
+                    .clone()
+                    .map(|i| {
+                        PolicyRng::seed_from_u64(episode_seed(settings.seed ^ 0xDE30, i as u64))
+                    })
+                    .collect(),
+                envs: envs.start - range.start..envs.end - range.start,
+            })
+        });
         let mut lane = Self {
             explorer,
             assemblers: vec![NStepAssembler::new(settings.n_step, settings.gamma); m],
@@ -572,6 +694,7 @@ impl Lane {
             decided: false,
             next_obs_id: k,
             id_stride: n,
+            demo,
             envs,
         };
         if training {
@@ -583,14 +706,16 @@ impl Lane {
     }
 
     /// Q-values of the current observations in one call of `values`, then
-    /// one epsilon-greedy action per environment; opens n-step windows
-    /// (training) and cuts them before exploratory actions (`cut`).
-    fn decide(
-        &mut self,
-        values: &mut dyn ActionValues,
-        training: bool,
-        cut: bool,
-    ) -> Result<(), ActorError> {
+    /// one epsilon-greedy action per environment, or the rule's for the
+    /// demonstrating ones (`demonstrating`); opens n-step windows (training)
+    /// and cuts them before exploratory actions and the rule's actions that
+    /// are not greedy (`cut`).
+    fn decide(&mut self, values: &mut dyn ActionValues, how: Decide) -> Result<(), ActorError> {
+        let Decide {
+            training,
+            cut,
+            demonstrating,
+        } = how;
         let m = self.envs.len();
         let a = self.envs.num_actions();
         if values.reads_sparse() {
@@ -611,11 +736,29 @@ impl Lane {
         }
         self.explorer
             .choose(&self.q, a, &self.episode_steps, &mut self.actions);
+        let demo = self.demo.as_mut().filter(|_| demonstrating);
+        let shown = demo.as_ref().map_or(0..0, |d| d.envs.clone());
+        if let Some(d) = demo {
+            for (k, i) in d.envs.clone().enumerate() {
+                let env = self.envs.env(i).expect("a lane's environment");
+                d.policy.act(
+                    std::slice::from_ref(env),
+                    &mut d.rngs[k..=k],
+                    &mut self.actions[i..=i],
+                )?;
+            }
+        }
         if cut {
             // n-step returns follow the greedy policy: a window ends
-            // (bootstrapping) before an exploratory action.
+            // (bootstrapping) before an exploratory action or a rule's
+            // action the network would not take.
             for i in 0..m {
-                if !self.explorer.was_greedy(i) {
+                let greedy = if shown.contains(&i) {
+                    self.actions[i] == argmax(&self.q[i * a..(i + 1) * a])
+                } else {
+                    self.explorer.was_greedy(i)
+                };
+                if !greedy {
                     self.assemblers[i].cut(&mut self.emitted);
                 }
             }

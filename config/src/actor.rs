@@ -80,6 +80,25 @@ pub struct ActorConfig {
     /// costs more than the overlap saves. Off: one forward pass for all,
     /// then one step for all.
     pub pipeline: bool,
+    /// Demonstrations early in training: this many environments of each
+    /// actor (its last ones, the least exploring of the ladder) follow
+    /// `demo_policy` instead of the network for the actor's first
+    /// `early_demo_steps` steps, then explore like the rest. Their
+    /// transitions enter the replay like any others; their n-step windows
+    /// are cut where the rule's action is not the network's greedy one, so
+    /// the returns stay those of the greedy policy. They give an occlusion
+    /// network the safe *go*s at a clear view that its own exploration
+    /// rarely reaches (reports/time-to-target/NOTES.md). 0: none. At most
+    /// `envs`.
+    pub early_demo_envs: usize,
+    /// Steps of each actor (one decision of each of its environments)
+    /// during which the demonstrating environments follow `demo_policy`.
+    /// At least 1 when `early_demo_envs` is set.
+    pub early_demo_steps: u64,
+    /// The rule the demonstrating environments follow, as `crossroads eval
+    /// --policy` reads it: `ttc:<seconds>` or `ttc-creep:<seconds>`.
+    /// Needed when `early_demo_envs` is set.
+    pub demo_policy: Option<String>,
     /// Greedy evaluation: no exploration, no transitions pushed; episodes
     /// are reported to the metrics (and the log: each at debug level,
     /// outcome rates every 30 s at info).
@@ -115,6 +134,9 @@ impl Default for ActorConfig {
             explore_go_once: true,
             cut_at_exploration: true,
             pipeline: true,
+            early_demo_envs: 0,
+            early_demo_steps: 0,
+            demo_policy: None,
             eval: false,
             transport: ActorTransport::Grpc,
             weights: None,
@@ -172,6 +194,26 @@ impl ActorConfig {
             "must be at least 1".to_owned(),
         );
         problems.within("in_flight", self.in_flight, 1..=1024);
+        if self.early_demo_envs > 0 {
+            problems.check(
+                self.early_demo_envs <= self.envs,
+                "early_demo_envs",
+                format!(
+                    "must be at most actor.envs ({}), got {}",
+                    self.envs, self.early_demo_envs
+                ),
+            );
+            problems.check(
+                self.early_demo_steps >= 1,
+                "early_demo_steps",
+                "must be at least 1 when actor.early_demo_envs is set".to_owned(),
+            );
+            problems.check(
+                self.demo_policy.is_some(),
+                "demo_policy",
+                "is needed when actor.early_demo_envs is set (e.g. \"ttc-creep:3.25\")".to_owned(),
+            );
+        }
         problems.into_vec()
     }
 }

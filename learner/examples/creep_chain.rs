@@ -33,6 +33,11 @@
 //!     --cars 4 --ratio 0.5 --updates 20000 --seeds 1,2,3
 //! ```
 //!
+//! `--demo-envs K --demo-updates U` lets the K least exploring
+//! environments of the ladder follow the rule (creep to the line, go when
+//! it is seen clear) for the first U updates: demonstrations in the replay,
+//! as `actor.early_demo_envs` does in `crossroads train`.
+//!
 //! Prints, every `--every` updates, the greedy policy's success, collision
 //! and timeout rates and the learned values at the line.
 
@@ -82,6 +87,13 @@ struct Options {
     cars: usize,
     /// The loss's Huber delta (the project's default: 20).
     huber: f64,
+    /// Environments (the least exploring of the ladder) that follow the
+    /// rule (creep to the line, go when it is seen clear) instead of the
+    /// network, until `demo_updates` updates.
+    demo_envs: usize,
+    /// Updates after which the demonstrating environments explore like
+    /// the rest.
+    demo_updates: u64,
 }
 
 impl Default for Options {
@@ -108,6 +120,8 @@ impl Default for Options {
             max_priority: false,
             cars: 0,
             huber: 20.0,
+            demo_envs: 0,
+            demo_updates: 0,
         }
     }
 }
@@ -154,6 +168,8 @@ fn parse() -> Options {
             "sync-every" => num!(o.sync_every),
             "cars" => num!(o.cars),
             "huber" => num!(o.huber),
+            "demo-envs" => num!(o.demo_envs),
+            "demo-updates" => num!(o.demo_updates),
             "hidden" => {
                 o.hidden = value
                     .split(',')
@@ -266,6 +282,18 @@ impl Chain {
             }
         }
         x
+    }
+
+    /// The rule the demonstrating environments follow: creep to the line,
+    /// wait there until the crossing is seen clear, go.
+    fn rule(&self, o: &Options) -> usize {
+        if self.position < o.positions {
+            CREEP
+        } else if self.clear {
+            GO
+        } else {
+            WAIT
+        }
     }
 
     fn step(&mut self, action: usize, rng: &mut Rng, o: &Options) -> (f32, Option<End>) {
@@ -466,23 +494,32 @@ fn run(o: &Options, seed: u64) {
     let mut replay = Replay::new(o.capacity, o.alpha);
     let (mut inserts, mut updates) = (0u64, 0u64);
     let mut go_inserts = [0u64; 2];
+    // Gos taken at the line, and those of them when clear.
+    let mut line_gos = [0u64; 2];
     println!(
-        "seed {seed}: ratio {}, {} positions, clear {}, {} steps; updates success collision timeout  Q(line,clear)[wait creep go]  Q(line,blocked)  transitions",
-        o.ratio, o.positions, o.clear, o.steps
+        "seed {seed}: ratio {}, {} positions, clear {}, {} steps, {} demonstrating envs until {} updates; updates success collision timeout  Q(line,clear)[wait creep go]  Q(line,blocked)  transitions",
+        o.ratio, o.positions, o.clear, o.steps, o.demo_envs, o.demo_updates
     );
     while updates < o.updates {
         // Every environment takes one step with the acting network.
         let obs: Vec<Vec<f32>> = envs.iter().map(|e| e.observation(o)).collect();
         let q = q_rows(&acting, &obs);
         for (i, env) in envs.iter_mut().enumerate() {
-            let action = if rng.uniform() < epsilon(i, o.envs) {
+            let demonstrating = i >= o.envs.saturating_sub(o.demo_envs) && updates < o.demo_updates;
+            let action = if demonstrating {
+                env.rule(o)
+            } else if rng.uniform() < epsilon(i, o.envs) {
                 rng.below(3)
             } else {
                 argmax(&q[i])
             };
+            let at_line = env.position == o.positions;
             let (reward, end) = env.step(action, &mut rng, o);
             if action == GO {
                 go_inserts[usize::from(reward > 0.0)] += 1;
+                if at_line {
+                    line_gos[usize::from(reward > 0.0)] += 1;
+                }
             }
             windows[i].push_back((obs[i].clone(), action, reward));
             let next = env.observation(o);
@@ -573,7 +610,7 @@ fn run(o: &Options, seed: u64) {
             if updates.is_multiple_of(o.every) {
                 let (rates, [clear, blocked]) = evaluate(trainer.online(), o, 300, seed);
                 println!(
-                    "  {updates:>6}  {:>6.1} % {:>6.1} % {:>6.1} %  [{:+.2} {:+.2} {:+.2}]  [{:+.2} {:+.2} {:+.2}]  {inserts} (gos {} safe {})",
+                    "  {updates:>6}  {:>6.1} % {:>6.1} % {:>6.1} %  [{:+.2} {:+.2} {:+.2}]  [{:+.2} {:+.2} {:+.2}]  {inserts} (gos {} safe {}; at the line {} safe {})",
                     rates[0] * 100.0,
                     rates[1] * 100.0,
                     rates[2] * 100.0,
@@ -585,6 +622,8 @@ fn run(o: &Options, seed: u64) {
                     blocked[GO],
                     go_inserts[0] + go_inserts[1],
                     go_inserts[1],
+                    line_gos[0] + line_gos[1],
+                    line_gos[1],
                 );
             }
         }

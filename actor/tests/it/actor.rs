@@ -363,3 +363,90 @@ fn exploring_creep_episodes_reach_the_creep_limit() {
         "absorbing-go exploration reaches the limit in {once:?} of episodes"
     );
 }
+
+/// Steps `a` for `steps` steps and tallies the episodes that end.
+fn tally(
+    a: &mut crossroads_actor::Actor,
+    values: &mut crate::util::LinearValues,
+    steps: usize,
+) -> EpisodeStats {
+    let mut stats = EpisodeStats::default();
+    for _ in 0..steps {
+        let summary = a.step(values).expect("step");
+        summary.episodes.iter().for_each(|e| stats.record(e));
+        while a.take_batch().is_some() {}
+    }
+    stats
+}
+
+/// `actor.early_demo_envs`: the demonstrating environments drive by the
+/// rule (TTC at 1.5 s, which never collides on left) for the first
+/// `early_demo_steps` steps, then by the network like the rest (this
+/// linear network waits out every episode).
+#[test]
+fn demonstrating_environments_follow_the_rule_then_the_network() {
+    let mut plain = actor_config(4, 64);
+    plain.epsilon_base = 0.0;
+    let (mut a, mut values) = actor(&plain, 0);
+    let network = tally(&mut a, &mut values, 1_500);
+    assert!(
+        network.successes == 0 && network.timeouts > 0,
+        "the linear network waits on its own: {network:?}"
+    );
+    let mut config = plain.clone();
+    config.early_demo_envs = 4;
+    config.early_demo_steps = 1_500;
+    config.demo_policy = Some("ttc:1.5".to_owned());
+    let (mut a, mut values) = actor(&config, 0);
+    assert!(a.settings().demonstrations.is_some());
+    let shown = tally(&mut a, &mut values, 1_500);
+    eprintln!("network alone {network:?}; demonstrating {shown:?}");
+    assert!(
+        shown.collisions == 0 && shown.successes > 100,
+        "the rule drives: {shown:?}"
+    );
+    // Episodes the rule had started finish; then the network drives.
+    tally(&mut a, &mut values, 200);
+    let after = tally(&mut a, &mut values, 1_500);
+    assert!(
+        after.successes == 0 && after.timeouts > 0,
+        "the network drives again: {after:?}"
+    );
+    // Evaluating actors never demonstrate.
+    config.eval = true;
+    let settings = ActorSettings::from_config(&SimConfig::default(), &config, 0).expect("settings");
+    assert!(settings.demonstrations.is_none());
+}
+
+#[test]
+fn a_demonstration_rule_that_cannot_drive_is_refused_by_name() {
+    let mut config = actor_config(4, 64);
+    config.early_demo_envs = 2;
+    config.early_demo_steps = 100;
+    for (rule, expected) in [
+        ("ttc-creep:3", "actor.demo_policy"),
+        ("random", "demonstrates nothing"),
+        ("ttc:x", "actor.demo_policy"),
+    ] {
+        config.demo_policy = Some(rule.to_owned());
+        let e = ActorSettings::from_config(&SimConfig::default(), &config, 0)
+            .expect_err(rule)
+            .to_string();
+        assert!(e.contains(expected), "{rule}: {e}");
+    }
+    config.demo_policy = None;
+    let problems = config.validate();
+    assert!(
+        problems.iter().any(|(key, _)| key == "actor.demo_policy"),
+        "{problems:?}"
+    );
+    config.demo_policy = Some("ttc:1.5".to_owned());
+    config.early_demo_envs = 5;
+    let problems = config.validate();
+    assert!(
+        problems
+            .iter()
+            .any(|(key, _)| key == "actor.early_demo_envs"),
+        "{problems:?}"
+    );
+}
