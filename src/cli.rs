@@ -509,9 +509,10 @@ pub struct PolicyArgs {
     /// own].
     #[arg(long, value_name = "PRESET|FILE")]
     pub drivers: Option<String>,
-    /// Action set the policy drives.
-    #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
-    pub actions: ActionSet,
+    /// Action set the policy drives: ttg, creep or sequential [default: a
+    /// network's own; ttg for a rule].
+    #[arg(long, value_parser = parse_action_set)]
+    pub actions: Option<ActionSet>,
     /// Put the policy behind the safety shield: each *go* is checked
     /// against the cars the ego senses and phantom cars where its view
     /// ends, and vetoed when any could come too close (ttg and creep

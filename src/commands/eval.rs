@@ -57,6 +57,9 @@ pub struct Loaded {
     pub policy: Box<dyn Policy>,
     /// With `--shield`: its assumptions and counters.
     pub shield: Option<(ShieldParams, Arc<ShieldCounters>)>,
+    /// The action set it drives: `--actions`, else a network's own, else
+    /// TTG.
+    pub actions: ActionSet,
 }
 
 /// The scenario and the policy that `args` name, checked to fit the action
@@ -66,22 +69,32 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
         Scenario::load_with_drivers(&args.scenario, args.drivers.as_deref())
             .with_context(|| format!("scenario {:?}", args.scenario))?,
     );
-    let mut policy: Box<dyn Policy> = match NetworkPolicy::load(Path::new(&args.policy))
-        .with_context(|| format!("--policy {}", args.policy))?
-    {
-        Some(mut net) => {
-            net.set_precision(args.precision);
-            net.fits(&Env::new(
-                Arc::clone(&scenario),
-                EnvConfig::for_actions(args.actions),
-            ))
-            .with_context(|| format!("--policy {}", args.policy))?;
-            Box::new(net)
-        }
-        None => parse_policy(&args.policy).context(
-            "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, random or never)",
-        )?,
-    };
+    let (mut policy, actions): (Box<dyn Policy>, ActionSet) =
+        match NetworkPolicy::load(Path::new(&args.policy))
+            .with_context(|| format!("--policy {}", args.policy))?
+        {
+            Some(mut net) => {
+                let actions = match args.actions {
+                    Some(set) => set,
+                    None => net.spec().action_set.parse().with_context(|| {
+                        format!("--policy {}: its action set", args.policy)
+                    })?,
+                };
+                net.set_precision(args.precision);
+                net.fits(&Env::new(
+                    Arc::clone(&scenario),
+                    EnvConfig::for_actions(actions),
+                ))
+                .with_context(|| format!("--policy {}", args.policy))?;
+                (Box::new(net), actions)
+            }
+            None => (
+                parse_policy(&args.policy).context(
+                    "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, random or never)",
+                )?,
+                args.actions.unwrap_or(ActionSet::Ttg),
+            ),
+        };
     let mut shield = None;
     if let Some(spec) = &args.shield {
         let params = ShieldParams::parse(spec).context("--shield")?;
@@ -89,17 +102,14 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
         shield = Some((params, shielded.counters()));
         policy = Box::new(shielded);
     }
-    policy.supports(args.actions).with_context(|| {
-        format!(
-            "--policy {} with --actions {}",
-            args.policy,
-            args.actions.name()
-        )
-    })?;
+    policy
+        .supports(actions)
+        .with_context(|| format!("--policy {} with --actions {}", args.policy, actions.name()))?;
     Ok(Loaded {
         scenario,
         policy,
         shield,
+        actions,
     })
 }
 
@@ -109,9 +119,10 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
         scenario,
         policy,
         shield,
+        actions,
     } = load(&args.run)?;
     anyhow::ensure!(args.trials > 0, "--trials must be at least 1");
-    let config = EvalConfig::new(args.run.actions, args.trials, args.seed);
+    let config = EvalConfig::new(actions, args.trials, args.seed);
 
     let bar = progress::bar(args.trials, "trials");
     bar.set_message(format!("{} on {}", policy.name(), scenario.name()));

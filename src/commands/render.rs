@@ -127,8 +127,9 @@ fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
         scenario,
         policy,
         shield,
+        actions,
     } = super::eval::load(&args.run)?;
-    let config = EnvConfig::for_actions(args.run.actions);
+    let config = EnvConfig::for_actions(actions);
     let options = SceneOptions {
         grid: args.grid.then_some(config.observation),
     };
@@ -169,7 +170,7 @@ fn record(args: &RenderArgs) -> anyhow::Result<Episode> {
                 scene.mark_shield(&env, &view, &sensed, threat.as_ref());
             }
         }
-        if go_at.is_none() && args.run.actions.decode(action[0])? == Control::Go {
+        if go_at.is_none() && actions.decode(action[0])? == Control::Go {
             go_at = Some(scenes.len() - 1);
         }
         env.step_with(action[0], |e| scenes.push(Scene::of(e, &view, &options)))?;

@@ -584,3 +584,33 @@ fn render_rejects_bad_requests_clearly() {
         "{stderr}"
     );
 }
+
+#[test]
+fn eval_takes_a_networks_own_action_set_unless_told_another() {
+    let net = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/reports/paper/runs/creep-occluded/best"
+    );
+    let args = [
+        "eval",
+        "--policy",
+        net,
+        "--scenario",
+        "occluded-60",
+        "--trials",
+        "20",
+        "--seed",
+        "3",
+    ];
+    let (ok, stdout, stderr) = crossroads(&[&args[..], &["--json"]].concat());
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    assert_eq!(v["actions"], "creep", "{v}");
+    assert_eq!(v["trials"], 20, "{v}");
+    let (ok, _, stderr) = crossroads(&[&args[..], &["--actions", "ttg"]].concat());
+    assert!(!ok);
+    assert!(
+        stderr.contains("with --actions ttg") && stderr.contains("trained for creep actions"),
+        "{stderr}"
+    );
+}
