@@ -237,7 +237,7 @@ fn a_checkpoint_for_other_actions_is_refused_by_eval() {
     let net = crossroads_model::QNetwork::new(spec, 1).expect("network");
     let file = dir.path().join("seq.safetensors");
     std::fs::write(&file, net.to_safetensors(3).expect("bytes")).expect("write");
-    let o = crossroads(&[
+    let args = [
         "eval",
         "--policy",
         file.to_str().expect("utf-8"),
@@ -245,10 +245,21 @@ fn a_checkpoint_for_other_actions_is_refused_by_eval() {
         "left",
         "--trials",
         "10",
-    ]);
+    ];
+    // Asked to drive other actions than its own, it is refused, naming
+    // what it reads.
+    let o = crossroads(&[&args[..], &["--actions", "ttg"]].concat());
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("sequential"), "{err}");
+    assert!(err.contains("sequential observations"), "{err}");
+    // Without --actions it drives its own.
+    let o = crossroads(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("(sequential actions)"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     let o = crossroads(&["eval", "--policy", "no/such/checkpoint", "--trials", "10"]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
