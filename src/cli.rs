@@ -492,7 +492,9 @@ pub enum CheckpointsAction {
 #[derive(Debug, Args)]
 pub struct PolicyArgs {
     /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, never (the ego
-    /// waits out the time limit: traffic alone), or a trained
+    /// waits out the time limit: traffic alone), oracle:<futures> (sees
+    /// hidden cars and goes when going reaches the goal in every one of
+    /// that many futures: the upper bound under occlusion), or a trained
     /// network: a checkpoint folder (runs/NAME/best,
     /// runs/NAME/checkpoints/ckpt-...) or a weights .safetensors file;
     /// several networks of the same kind joined by commas act on the mean
@@ -520,9 +522,9 @@ pub struct PolicyArgs {
     /// `--shield margin_s=0.3,phantom_factor=1.1` (keys: speed_factor,
     /// phantom_factor, slow_factor, margin_s, gap_m, follower_decel,
     /// reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel,
-    /// range_m, leader_decel; `yield_decel=4.5` counts on comfortable
-    /// braking only;
-    /// `range_m=150` senses each lane whole, as the TTC rule does), or take
+    /// range_m, leader_decel, see_through; `yield_decel=4.5` counts on
+    /// comfortable braking only; `range_m=150` senses each lane whole, as
+    /// the TTC rule does; `see_through=1` lets walls hide nothing), or take
     /// a driver population's worst bounds with `assume=human` (a preset or
     /// a drivers file; the defaults assume SUMO's drivers).
     #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]

@@ -16,7 +16,8 @@ use crossroads_common::Shutdown;
 use crossroads_common::retry::Backoff;
 use crossroads_config::{ActorConfig, SimConfig, TransportConfig};
 use crossroads_sim::{
-    ActionSet, EnvConfig, Policy, PolicyRng, PolicySpec, Scenario, episode_seed, splitmix64,
+    ActionSet, EnvConfig, Policy, PolicyRng, PolicySpec, Scenario, SensedCar, ShieldParams,
+    check_go, episode_seed, sense, shield_fallback, splitmix64,
 };
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;
@@ -67,6 +68,45 @@ pub struct ActorSettings {
     /// Environments that follow a rule early in training
     /// (`actor.early_demo_envs`); `None` when none do or when evaluating.
     pub demonstrations: Option<Demonstrations>,
+    /// The shield every environment acts through (`actor.shield`).
+    pub shield: Option<ActorShield>,
+}
+
+/// The safety shield in the acting loop (`actor.shield`,
+/// `actor.veto_cost`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActorShield {
+    /// Its assumptions.
+    pub params: ShieldParams,
+    /// Subtracted from the reward of a vetoed *go*'s own transition.
+    pub veto_cost: f32,
+}
+
+impl ActorShield {
+    /// From `actor.shield` and `actor.veto_cost`; `None` when unset; an
+    /// error naming `actor.shield` when its assumptions do not parse or the
+    /// action set has no final *go* to check.
+    fn from_config(
+        config: &ActorConfig,
+        action_set: ActionSet,
+    ) -> Result<Option<Self>, ActorError> {
+        let Some(spec) = config.shield.as_deref() else {
+            return Ok(None);
+        };
+        let params = ShieldParams::parse(spec)
+            .map_err(|e| ActorError::Config(format!("actor.shield: {e}")))?;
+        if action_set.absorbing_go().is_none() {
+            return Err(ActorError::Config(format!(
+                "actor.shield: the shield checks a final go, which the {} actions do not have \
+                 (use ttg or creep)",
+                action_set.name()
+            )));
+        }
+        Ok(Some(Self {
+            params,
+            veto_cost: config.veto_cost as f32,
+        }))
+    }
 }
 
 /// Demonstrations (`actor.early_demo_envs`, `actor.demo_policy`,
@@ -105,6 +145,12 @@ impl Demonstrations {
         if matches!(policy, PolicySpec::Random | PolicySpec::Never) {
             return Err(ActorError::Config(format!(
                 "actor.demo_policy: {text} demonstrates nothing; use ttc:<seconds> or ttc-creep:<seconds>"
+            )));
+        }
+        if matches!(policy, PolicySpec::Oracle(_)) {
+            return Err(ActorError::Config(format!(
+                "actor.demo_policy: {text} sees cars behind the walls; its demonstrations would \
+                 teach going blind. Use ttc:<seconds> or ttc-creep:<seconds>"
             )));
         }
         policy
@@ -188,6 +234,7 @@ impl ActorSettings {
             }
         };
         let demonstrations = Demonstrations::from_config(config, action_set)?;
+        let shield = ActorShield::from_config(config, action_set)?;
         Ok(Self {
             scenario,
             action_set,
@@ -204,6 +251,7 @@ impl ActorSettings {
             cut_at_exploration: config.cut_at_exploration,
             pipeline: config.pipeline,
             demonstrations,
+            shield,
         })
     }
 }
@@ -362,6 +410,25 @@ struct Lane {
     id_stride: u64,
     /// This lane's demonstrating environments, if any.
     demo: Option<LaneDemo>,
+    /// The shield the lane acts through, if any.
+    shield: Option<ActorShield>,
+    /// Cars the shield sensed (scratch).
+    sensed: Vec<SensedCar>,
+    /// Per environment, the *go* the shield vetoed at the last decision
+    /// (training), to be stored beside the executed action.
+    vetoed: Vec<Option<VetoedGo>>,
+    /// *Go*s vetoed since the counter was last read.
+    vetoes: u64,
+}
+
+/// A *go* the shield replaced, waiting for the executed step's outcome.
+#[derive(Debug)]
+struct VetoedGo {
+    observation: ObsRef,
+    action: u32,
+    /// Initial priority: |Q(fallback) - veto_cost - Q(go)|, the TD error
+    /// with the fallback's own estimate as its target.
+    priority: f32,
 }
 
 /// The rule a lane's demonstrating environments follow, which of them
@@ -480,6 +547,7 @@ impl Actor {
         };
         let mut done = Recorded {
             training,
+            gamma: self.settings.gamma,
             mode: if training { "train" } else { "eval" },
             scenario: self.settings.scenario.name(),
             metrics: &self.metrics,
@@ -515,6 +583,9 @@ impl Actor {
         }
         let mut summary = done.summary;
         for lane in &mut self.lanes {
+            self.metrics
+                .shield_vetoes
+                .inc_by(std::mem::take(&mut lane.vetoes));
             summary.transitions += lane.emitted.len() as u64;
             for t in lane.emitted.drain(..) {
                 self.builder.push(&t);
@@ -634,6 +705,8 @@ struct Decide {
 /// episode metrics, the evaluation tally.
 struct Recorded<'a> {
     training: bool,
+    /// Discount per simulation step.
+    gamma: f64,
     mode: &'static str,
     scenario: &'a str,
     metrics: &'a ActorMetrics,
@@ -695,6 +768,10 @@ impl Lane {
             next_obs_id: k,
             id_stride: n,
             demo,
+            shield: settings.shield,
+            sensed: Vec::new(),
+            vetoed: (0..m).map(|_| None).collect(),
+            vetoes: 0,
             envs,
         };
         if training {
@@ -724,9 +801,15 @@ impl Lane {
             values.q_values(self.envs.observations(), m, &mut self.q)
         }
         .map_err(|e| ActorError::Values(e.to_string()))?;
+        // The observations decided on, kept while a shield may veto.
+        let mut decided_on: Vec<Option<ObsRef>> = Vec::new();
         if training {
             for i in 0..m {
                 if let Some(obs) = self.current[i].take() {
+                    if self.shield.is_some() {
+                        decided_on.resize(m, None);
+                        decided_on[i] = Some(Arc::clone(&obs));
+                    }
                     self.assemblers[i].begin(obs, &self.q[i * a..(i + 1) * a], &mut self.emitted);
                 }
             }
@@ -748,6 +831,9 @@ impl Lane {
                 )?;
             }
         }
+        if self.shield.is_some() {
+            self.shield_decisions(&mut decided_on);
+        }
         if cut {
             // n-step returns follow the greedy policy: a window ends
             // (bootstrapping) before an exploratory action or a rule's
@@ -765,6 +851,44 @@ impl Lane {
         }
         self.decided = true;
         Ok(())
+    }
+
+    /// The shield's checks of this decision's *go*s: a vetoed one becomes
+    /// the network's best one-step alternative; when training, it is kept
+    /// (with the observation decided on, from `decided_on`) to be stored
+    /// beside the executed action.
+    fn shield_decisions(&mut self, decided_on: &mut [Option<ObsRef>]) {
+        let Some(shield) = self.shield else { return };
+        let a = self.envs.num_actions();
+        for i in 0..self.envs.len() {
+            let env = self.envs.env(i).expect("a lane's environment");
+            let Some(go) = env.config().action_set.absorbing_go() else {
+                return;
+            };
+            if self.actions[i] != go || env.ego().committed {
+                continue;
+            }
+            sense(env, &shield.params, &mut self.sensed);
+            if check_go(env, &self.sensed, &shield.params).is_none() {
+                continue;
+            }
+            let q = &self.q[i * a..(i + 1) * a];
+            let fallback = shield_fallback(env, go, Some(q));
+            self.actions[i] = fallback;
+            self.vetoes += 1;
+            if let Some(observation) = decided_on.get_mut(i).and_then(Option::take) {
+                let td = (q[fallback] - shield.veto_cost - q[go]).abs();
+                self.vetoed[i] = Some(VetoedGo {
+                    observation,
+                    action: go as u32,
+                    priority: if td.is_finite() {
+                        td
+                    } else {
+                        crate::nstep::FALLBACK_PRIORITY
+                    },
+                });
+            }
+        }
     }
 
     /// Steps every environment with its chosen action (on the rayon pool).
@@ -794,6 +918,8 @@ impl Lane {
             if done.training {
                 let action = self.actions[i];
                 let terminal = r.done.then(|| self.intern(i, true));
+                let vetoed = self.vetoed[i].take();
+                let after = terminal.clone();
                 self.assemblers[i].record(
                     action as u32,
                     self.q[i * a + action],
@@ -802,7 +928,25 @@ impl Lane {
                     terminal,
                     &mut self.emitted,
                 );
-                self.current[i] = Some(self.intern(i, false));
+                let next = self.intern(i, false);
+                if let Some(v) = vetoed {
+                    // The shielded task's go: the executed step's outcome,
+                    // less the cost.
+                    let (next_observation, discount) = match after {
+                        Some(last) => (last, 0.0),
+                        None => (Arc::clone(&next), done.gamma.powi(r.steps as i32) as f32),
+                    };
+                    let cost = self.shield.map_or(0.0, |s| s.veto_cost);
+                    self.emitted.push(NStepTransition {
+                        observation: v.observation,
+                        action: v.action,
+                        reward: r.reward as f32 - cost,
+                        discount,
+                        priority: v.priority,
+                        next_observation,
+                    });
+                }
+                self.current[i] = Some(next);
             }
         }
     }

@@ -8,6 +8,7 @@
 //! | `crossroads_actor_episode_duration_seconds` | histogram | scenario, mode, outcome | simulated time of an episode |
 //! | `crossroads_actor_episode_brake_seconds` | histogram | scenario, mode | braking time of traffic per episode |
 //! | `crossroads_actor_transitions_assembled_total` | counter | | n-step transitions assembled |
+//! | `crossroads_actor_shield_vetoes_total` | counter | | *go*s the shield in the loop vetoed (`actor.shield`) |
 //! | `crossroads_actor_transitions_pushed_total` | counter | transport | transitions the replay acknowledged |
 //! | `crossroads_actor_transitions_dropped_total` | counter | reason | `buffer_full` (oldest dropped while the replay was unreachable) or `rejected` (refused by the replay) |
 //! | `crossroads_actor_push_buffer_batches` | gauge | | batches waiting to be sent |
@@ -38,6 +39,8 @@ pub struct ActorMetrics {
     episode_brake: HistogramVec,
     /// n-step transitions assembled.
     pub transitions_assembled: IntCounter,
+    /// *Go*s the shield in the loop vetoed (`actor.shield`).
+    pub shield_vetoes: IntCounter,
     pushed: IntCounterVec,
     dropped: IntCounterVec,
     /// Batches waiting to be sent.
@@ -97,6 +100,10 @@ impl ActorMetrics {
         let transitions_assembled = IntCounter::new(
             "crossroads_actor_transitions_assembled_total",
             "n-step transitions assembled",
+        )?;
+        let shield_vetoes = IntCounter::new(
+            "crossroads_actor_shield_vetoes_total",
+            "Go decisions the shield in the loop (actor.shield) vetoed and replaced",
         )?;
         let pushed = counter_vec(
             "crossroads_actor_transitions_pushed_total",
@@ -159,6 +166,7 @@ impl ActorMetrics {
             r.register(Box::new(episode_duration.clone()))?;
             r.register(Box::new(episode_brake.clone()))?;
             r.register(Box::new(transitions_assembled.clone()))?;
+            r.register(Box::new(shield_vetoes.clone()))?;
             r.register(Box::new(pushed.clone()))?;
             r.register(Box::new(dropped.clone()))?;
             r.register(Box::new(buffer_batches.clone()))?;
@@ -180,6 +188,7 @@ impl ActorMetrics {
             episode_duration,
             episode_brake,
             transitions_assembled,
+            shield_vetoes,
             pushed,
             dropped,
             buffer_batches,

@@ -99,6 +99,22 @@ pub struct ActorConfig {
     /// --policy` reads it: `ttc:<seconds>` or `ttc-creep:<seconds>`.
     /// Needed when `early_demo_envs` is set.
     pub demo_policy: Option<String>,
+    /// The safety shield in the training loop: every environment acts
+    /// through it. A vetoed *go* executes as the network's best one-step
+    /// alternative (wait or creep), and that executed action is what its
+    /// n-step window records; beside it the vetoed *go* is stored as a
+    /// transition of its own, with the executed step's outcome less
+    /// `veto_cost` (the shielded task's *go*, after Alshiekh et al. 2018),
+    /// so Q(go) where the shield vetoes learns the alternative's value less
+    /// the cost instead of staying unvisited. The value is the shield's
+    /// assumptions as `crossroads eval --shield` reads them (`default`,
+    /// `assume=human`, `margin_s=0.3`, ...); the run's evaluations and its
+    /// `best/` are then behind the same shield. TTG and Creep-and-Go
+    /// actions only. Unset: no shield.
+    pub shield: Option<String>,
+    /// What a vetoed *go* costs in its stored transition, in the reward's
+    /// units (a success is worth 1). At least 0.
+    pub veto_cost: f64,
     /// Greedy evaluation: no exploration, no transitions pushed; episodes
     /// are reported to the metrics (and the log: each at debug level,
     /// outcome rates every 30 s at info).
@@ -137,6 +153,8 @@ impl Default for ActorConfig {
             early_demo_envs: 0,
             early_demo_steps: 0,
             demo_policy: None,
+            shield: None,
+            veto_cost: 0.0,
             eval: false,
             transport: ActorTransport::Grpc,
             weights: None,
@@ -194,6 +212,11 @@ impl ActorConfig {
             "must be at least 1".to_owned(),
         );
         problems.within("in_flight", self.in_flight, 1..=1024);
+        problems.check(
+            self.veto_cost.is_finite() && self.veto_cost >= 0.0,
+            "veto_cost",
+            format!("must be finite and at least 0, got {}", self.veto_cost),
+        );
         if self.early_demo_envs > 0 {
             problems.check(
                 self.early_demo_envs <= self.envs,

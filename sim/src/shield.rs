@@ -162,6 +162,11 @@ pub struct ShieldParams {
     /// of a merging ego slowing from 14.8 to 8 m/s in 3 s: `occluded-60`,
     /// drivers with speed factor sd 0.3, seed 5 trial 4187).
     pub leader_decel: f64,
+    /// Walls hide nothing: the shield senses every car on the grid (or in
+    /// `range_m`) and places no phantom short of a lane's start. Not a
+    /// sensor anyone has: a rung of the ladder that measures what the
+    /// walls cost (`see_through=1`).
+    pub see_through: bool,
 }
 
 impl Default for ShieldParams {
@@ -180,6 +185,7 @@ impl Default for ShieldParams {
             hard_decel: 9.0,
             range_m: None,
             leader_decel: 0.0,
+            see_through: false,
         }
     }
 }
@@ -258,6 +264,13 @@ impl ShieldParams {
                 p.range_m = Some(v);
                 continue;
             }
+            if key.trim() == "see_through" {
+                if v != 0.0 && v != 1.0 {
+                    return Err(err(format!("see_through: {value:?} is not 0 or 1")));
+                }
+                p.see_through = v == 1.0;
+                continue;
+            }
             let field = match key.trim() {
                 "speed_factor" => &mut p.speed_factor,
                 "phantom_factor" => &mut p.phantom_factor,
@@ -275,7 +288,7 @@ impl ShieldParams {
                     return Err(err(format!(
                         "unknown key {other:?}; known: assume, speed_factor, phantom_factor, \
                          slow_factor, margin_s, gap_m, follower_decel, reaction_s, yield_decel, \
-                         fall_in_decel, clear_s, hard_decel, range_m, leader_decel"
+                         fall_in_decel, clear_s, hard_decel, range_m, leader_decel, see_through"
                     )));
                 }
             };
@@ -355,7 +368,7 @@ pub fn sense(env: &Env, params: &ShieldParams, out: &mut Vec<SensedCar>) {
     let sc = env.scenario();
     let grid = GridGeometry::of(env, ObsKind::Ttg);
     let (_, cols) = grid.shape();
-    let occluded = !env.occluders().is_empty();
+    let occluded = !params.see_through && !env.occluders().is_empty();
     // Visibility of the cells looked at so far (0 unknown, 1 seen, 2 hidden).
     let mut seen = [0u8; crate::observation::TTG_ROWS * crate::observation::TTG_COLS];
     let mut visible = |p: crate::geometry::Vec2| -> bool {
@@ -1163,6 +1176,38 @@ mod tests {
         assert_eq!((threat.car.lane, threat.kind), (0, ThreatKind::Crossing));
         env.step(0).unwrap();
         assert_eq!(env.outcome(), Some(Outcome::Collision), "going hits him");
+    }
+
+    #[test]
+    fn seeing_through_walls_senses_the_hidden_car_and_no_phantom_at_the_shadow() {
+        // The wall and the hidden car of the test above.
+        let mut env = empty("occluded");
+        let wall = OrientedRect::new(Vec2::new(-26.0, -4.0), 0.0, 40.0, 1.0);
+        env.set_occluders(&[wall]);
+        env.set_ego(env.scenario().spec().ego.stop_line_s, 0.0, false);
+        let edge = verdict(&env)
+            .0
+            .iter()
+            .find(|c| c.phantom && c.lane == 0)
+            .expect("a phantom where the wall's shadow starts")
+            .s;
+        env.place_car(0, edge - 10.0, 20.0).unwrap();
+        let p = ShieldParams::parse("see_through=1").unwrap();
+        assert!(p.see_through);
+        let mut cars = Vec::new();
+        sense(&env, &p, &mut cars);
+        assert!(
+            cars.iter().any(|c| !c.phantom && c.lane == 0),
+            "the hidden car is sensed: {cars:?}"
+        );
+        let phantom = cars.iter().find(|c| c.phantom && c.lane == 0).unwrap();
+        assert!(phantom.s < edge - 10.0, "{} against {edge}", phantom.s);
+        let threat = check_go(&env, &cars, &p).expect("the car still rules out going");
+        assert!(!threat.car.phantom);
+        let e = ShieldParams::parse("see_through=2")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("see_through"), "{e}");
     }
 
     #[test]

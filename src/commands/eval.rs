@@ -90,7 +90,7 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
             }
             None => (
                 parse_policy(&args.policy).context(
-                    "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, random or never)",
+                    "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, oracle:<futures>, random or never)",
                 )?,
                 args.actions.unwrap_or(ActionSet::Ttg),
             ),

@@ -115,6 +115,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         }
         assert_shielded(&row["shielded"], "dqn:", row, 300);
         assert_shielded(&row["shield_alone"], "ttc-creep:0", row, 300);
+        assert_ladder(row, 300);
     }
     let t3 = r["table3"].as_array().expect("table3");
     assert_eq!(t3.len(), 5);
@@ -135,6 +136,11 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     assert!(md.contains("![Figure 3](fig3.png)"), "{md}");
     assert!(md.contains("| DQN-TTG + shield |"), "{md}");
     assert!(md.contains("| DQN-Creep + shield |"), "{md}");
+    assert!(
+        md.contains("## How far from the limit under occlusion"),
+        "{md}"
+    );
+    assert!(md.contains("| oracle |"), "{md}");
     assert!(md.contains("## The DQN behind the safety shield"), "{md}");
     assert!(md.contains("| Left, shield alone | "), "{md}");
     let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
@@ -234,12 +240,18 @@ fn a_tiny_reproduction_of_table2_trains_evaluates_reports_and_reuses() {
         }
         assert_shielded(&row["shielded"], "dqn:", row, 20);
         assert_shielded(&row["shield_alone"], "ttc-creep:0", row, 20);
+        assert_ladder(row, 20);
     }
     let runs = r["runs"].as_array().expect("runs");
     assert_eq!(runs.len(), 2, "creep and TTG on occlusion: {runs:?}");
     let md = std::fs::read_to_string(out.join("README.md")).expect("readme");
     assert!(md.contains("--quick smoke run"), "{md}");
     assert!(md.contains("| DQN-Creep + shield |"), "{md}");
+    assert!(
+        md.contains("## How far from the limit under occlusion"),
+        "{md}"
+    );
+    assert!(md.contains("| oracle |"), "{md}");
 
     let again = reproduce(&out, &tiny);
     let log2 = String::from_utf8_lossy(&again.stderr);
@@ -382,4 +394,21 @@ fn baselines_only_measures_ttc_without_training_or_weights() {
     assert!(readme.contains("**Baselines only**"), "{readme}");
     // No claim about DQN cells that were never measured.
     assert!(!readme.contains("Where the DQNs fall short"), "{readme}");
+}
+
+/// Table II's ladder on a row: the shield alone with transparent walls
+/// (with the shield's counts) and the oracle, on the row's trials; the
+/// oracle succeeds at least as often as the shield alone.
+fn assert_ladder(row: &serde_json::Value, trials: u64) {
+    assert_shielded(&row["see_through"], "ttc-creep:0", row, trials);
+    let oracle = &row["oracle"];
+    assert_eq!(cell_trials(oracle), trials, "{row}");
+    assert!(
+        oracle["policy"]
+            .as_str()
+            .is_some_and(|p| p.starts_with("oracle:")),
+        "{row}"
+    );
+    let success = |c: &serde_json::Value| c["success"].as_f64().expect("success");
+    assert!(success(oracle) >= success(&row["shield_alone"]), "{row}");
 }

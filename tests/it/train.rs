@@ -265,3 +265,28 @@ fn a_checkpoint_for_other_actions_is_refused_by_eval() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("checkpoint folder"), "{err}");
 }
+
+/// `actor.shield`: the actors act through the shield and the run's
+/// evaluations are behind it too, so even an untrained network's curve
+/// on Right shows no collision.
+#[test]
+fn a_tiny_run_with_the_shield_in_the_loop_evaluates_behind_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("run");
+    let budget: Vec<&str> = TINY
+        .iter()
+        .copied()
+        .chain(["actor.shield=default", "actor.veto_cost=0.05"])
+        .collect();
+    let o = train(&out, &budget, "30", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = read_curve(&out.join("curve.csv")).expect("curve");
+    assert!(!rows.is_empty());
+    assert!(
+        rows.iter().all(|e| e.collision_rate == 0.0),
+        "behind the shield: {:?}",
+        rows.iter().map(|e| e.collision_rate).collect::<Vec<_>>()
+    );
+    let best = summary(&out)["best"].clone();
+    assert_eq!(best["collision_rate"], 0.0, "{best}");
+}

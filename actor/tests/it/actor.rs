@@ -450,3 +450,84 @@ fn a_demonstration_rule_that_cannot_drive_is_refused_by_name() {
         "{problems:?}"
     );
 }
+
+/// `actor.shield`: a network that always wants to go acts through the
+/// shield. No episode collides; every veto is counted and its *go* stored
+/// beside the executed wait as a transition of its own, which bootstraps
+/// (a real *go* ends the episode) and earns the wait's reward less
+/// `actor.veto_cost`. Without the shield the same network collides.
+#[test]
+fn a_shield_in_the_loop_replaces_vetoed_gos_and_stores_them_with_their_cost() {
+    let run = |shield: Option<&str>| {
+        let mut config = actor_config(4, 64);
+        config.epsilon_base = 0.0;
+        config.shield = shield.map(str::to_owned);
+        config.veto_cost = 0.5;
+        let (mut a, mut values) = actor(&config, 0);
+        // Go (action 0) first everywhere.
+        values.bias = vec![1.0, 0.0, 0.0, 0.0, 0.0];
+        values.scale = vec![0.0; 5];
+        let mut stats = EpisodeStats::default();
+        let mut kept_gos = Vec::new();
+        for _ in 0..600 {
+            let summary = a.step(&mut values).expect("step");
+            summary.episodes.iter().for_each(|e| stats.record(e));
+            while let Some(b) = a.take_batch() {
+                let c = &b.columns;
+                for k in 0..c.actions.len() {
+                    if c.actions[k] == 0 && c.discounts[k] > 0.0 {
+                        kept_gos.push((c.rewards[k], c.priorities[k]));
+                    }
+                }
+            }
+        }
+        (stats, a.metrics().shield_vetoes.get(), kept_gos)
+    };
+    let (bare, vetoes, kept) = run(None);
+    assert!(bare.collisions > 0, "going at once collides: {bare:?}");
+    assert_eq!((vetoes, kept.len()), (0, 0));
+
+    let (shielded, vetoes, kept) = run(Some("default"));
+    eprintln!(
+        "shielded {shielded:?}, {vetoes} vetoes, {} kept",
+        kept.len()
+    );
+    assert_eq!(shielded.collisions, 0, "{shielded:?}");
+    assert!(shielded.successes > 0, "{shielded:?}");
+    assert!(vetoes > 0);
+    assert!(!kept.is_empty() && kept.len() as u64 <= vetoes);
+    for (reward, priority) in kept {
+        // One step of waiting earns the step reward, -0.01.
+        assert!((reward - (-0.01 - 0.5)).abs() < 1e-5, "{reward}");
+        // |Q(wait) - cost - Q(go)| = |0 - 0.5 - 1|.
+        assert!((priority - 1.5).abs() < 1e-5, "{priority}");
+    }
+}
+
+#[test]
+fn a_shield_that_cannot_check_is_refused_by_name() {
+    let mut config = actor_config(4, 64);
+    config.shield = Some("wings=2".to_owned());
+    let e = ActorSettings::from_config(&SimConfig::default(), &config, 0)
+        .expect_err("unknown key")
+        .to_string();
+    assert!(e.contains("actor.shield") && e.contains("wings"), "{e}");
+    config.shield = Some("default".to_owned());
+    let sequential = SimConfig {
+        action_set: "sequential".to_owned(),
+        ..SimConfig::default()
+    };
+    let e = ActorSettings::from_config(&sequential, &config, 0)
+        .expect_err("sequential")
+        .to_string();
+    assert!(
+        e.contains("actor.shield") && e.contains("sequential"),
+        "{e}"
+    );
+    config.veto_cost = -1.0;
+    let problems = config.validate();
+    assert!(
+        problems.iter().any(|(key, _)| key == "actor.veto_cost"),
+        "{problems:?}"
+    );
+}

@@ -3,17 +3,21 @@
 //!
 //! A [`Policy`] decides for a batch of environments in one call, so a
 //! network acts on all of them with one forward pass. Besides the
-//! baselines: [`NeverPolicy`] (waits until the time limit) and
-//! [`ShieldedPolicy`] (any policy behind the safety shield).
+//! baselines: [`NeverPolicy`] (waits until the time limit),
+//! [`ShieldedPolicy`] (any policy behind the safety shield) and
+//! [`OraclePolicy`] (sees hidden cars and tries each *go* first: the upper
+//! bound under occlusion).
 
 mod never;
+mod oracle;
 mod random;
 mod shielded;
 mod ttc;
 
 pub use never::NeverPolicy;
+pub use oracle::OraclePolicy;
 pub use random::RandomPolicy;
-pub use shielded::{ShieldCounters, ShieldStats, ShieldedPolicy};
+pub use shielded::{ShieldCounters, ShieldStats, ShieldedPolicy, shield_fallback};
 pub use ttc::TtcPolicy;
 
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -69,6 +73,10 @@ pub enum PolicySpec {
     Random,
     /// Never goes ([`NeverPolicy`]).
     Never,
+    /// `oracle:<futures>`: goes when going reaches the goal in every one of
+    /// that many forks of the present, hidden cars included
+    /// ([`OraclePolicy`]).
+    Oracle(u32),
 }
 
 impl PolicySpec {
@@ -79,6 +87,7 @@ impl PolicySpec {
             Self::TtcCreep(t) => Box::new(TtcPolicy::new(t, true)),
             Self::Random => Box::new(RandomPolicy),
             Self::Never => Box::new(NeverPolicy),
+            Self::Oracle(k) => Box::new(OraclePolicy::new(k)),
         }
     }
 }
@@ -96,9 +105,17 @@ impl std::str::FromStr for PolicySpec {
             "never" => return Ok(Self::Never),
             _ => {}
         }
-        let (kind, value) = s
-            .split_once(':')
-            .ok_or_else(|| err("expected ttc:<seconds>, ttc-creep:<seconds>, random or never"))?;
+        let (kind, value) = s.split_once(':').ok_or_else(|| {
+            err("expected ttc:<seconds>, ttc-creep:<seconds>, oracle:<futures>, random or never")
+        })?;
+        if kind == "oracle" {
+            return match value.parse::<u32>() {
+                Ok(k) if k > 0 => Ok(Self::Oracle(k)),
+                _ => Err(err(
+                    "the oracle's futures must be a whole number, 1 or more",
+                )),
+            };
+        }
         let t: f64 = value
             .parse()
             .map_err(|_| err("the threshold must be a number of seconds"))?;
@@ -111,7 +128,7 @@ impl std::str::FromStr for PolicySpec {
             "ttc" => Ok(Self::Ttc(t)),
             "ttc-creep" => Ok(Self::TtcCreep(t)),
             _ => Err(err(
-                "expected ttc:<seconds>, ttc-creep:<seconds>, random or never",
+                "expected ttc:<seconds>, ttc-creep:<seconds>, oracle:<futures>, random or never",
             )),
         }
     }
@@ -124,11 +141,13 @@ impl std::fmt::Display for PolicySpec {
             Self::TtcCreep(t) => write!(f, "ttc-creep:{t}"),
             Self::Random => f.write_str("random"),
             Self::Never => f.write_str("never"),
+            Self::Oracle(k) => write!(f, "oracle:{k}"),
         }
     }
 }
 
-/// Parses `ttc:<seconds>`, `ttc-creep:<seconds>` or `random` into a policy.
+/// Parses `ttc:<seconds>`, `ttc-creep:<seconds>`, `oracle:<futures>`,
+/// `random` or `never` into a policy.
 pub fn parse_policy(s: &str) -> Result<Box<dyn Policy>, SimError> {
     Ok(s.parse::<PolicySpec>()?.build())
 }
@@ -149,7 +168,22 @@ mod tests {
         );
         assert_eq!("random".parse::<PolicySpec>().unwrap(), PolicySpec::Random);
         assert_eq!("never".parse::<PolicySpec>().unwrap(), PolicySpec::Never);
-        for bad in ["ttc", "ttc:", "ttc:x", "ttc:-1", "ttc:inf", "dqn:3", ""] {
+        assert_eq!(
+            "oracle:16".parse::<PolicySpec>().unwrap(),
+            PolicySpec::Oracle(16)
+        );
+        assert_eq!(PolicySpec::Oracle(8).to_string(), "oracle:8");
+        for bad in [
+            "ttc",
+            "ttc:",
+            "ttc:x",
+            "ttc:-1",
+            "ttc:inf",
+            "dqn:3",
+            "",
+            "oracle:0",
+            "oracle:1.5",
+        ] {
             assert!(bad.parse::<PolicySpec>().is_err(), "{bad}");
         }
         assert_eq!(parse_policy("ttc:2").unwrap().name(), "ttc:2");

@@ -84,34 +84,41 @@ impl ShieldedPolicy {
         check_go(env, cars, &self.params)
     }
 
-    /// The action that replaces a vetoed *go*: the policy's best one-step
-    /// alternative (by its values; else creeping while the creep limit is
-    /// ahead, or waiting), so that it can go again as soon as the shield
-    /// lets it.
+    /// The action that replaces a vetoed *go* ([`shield_fallback`], by the
+    /// inner policy's values when it has them).
     fn fallback(&self, env: &Env, go: usize) -> Result<usize, SimError> {
-        let set = env.config().action_set;
-        let one_step: Vec<usize> = (0..set.num_actions())
-            .filter(|&a| a != go && matches!(set.decode(a), Ok(Control::Wait(1) | Control::Creep)))
-            .collect();
-        if let Some(q) = self.inner.values(env)?
-            && let Some(&a) = one_step.iter().max_by(|&&a, &&b| q[a].total_cmp(&q[b]))
-        {
-            return Ok(a);
-        }
-        let e = &env.scenario().spec().ego;
-        let creep = env.ego().s < e.creep_limit_s - 0.05;
-        let wanted = if creep {
-            Control::Creep
-        } else {
-            Control::Wait(1)
-        };
-        Ok(one_step
-            .iter()
-            .copied()
-            .find(|&a| set.decode(a).ok() == Some(wanted))
-            .or_else(|| one_step.first().copied())
-            .unwrap_or(go))
+        let q = self.inner.values(env)?;
+        Ok(shield_fallback(env, go, q.as_deref()))
     }
+}
+
+/// The action that replaces a vetoed *go* (index `go`) in `env`: the best
+/// one-step alternative by `q` (a network's values, one per action) when
+/// given; else creeping while the creep limit is ahead, or waiting one
+/// step; so that the ego can go again as soon as the shield lets it.
+pub fn shield_fallback(env: &Env, go: usize, q: Option<&[f32]>) -> usize {
+    let set = env.config().action_set;
+    let one_step: Vec<usize> = (0..set.num_actions())
+        .filter(|&a| a != go && matches!(set.decode(a), Ok(Control::Wait(1) | Control::Creep)))
+        .collect();
+    if let Some(q) = q
+        && let Some(&a) = one_step.iter().max_by(|&&a, &&b| q[a].total_cmp(&q[b]))
+    {
+        return a;
+    }
+    let e = &env.scenario().spec().ego;
+    let creep = env.ego().s < e.creep_limit_s - 0.05;
+    let wanted = if creep {
+        Control::Creep
+    } else {
+        Control::Wait(1)
+    };
+    one_step
+        .iter()
+        .copied()
+        .find(|&a| set.decode(a).ok() == Some(wanted))
+        .or_else(|| one_step.first().copied())
+        .unwrap_or(go)
 }
 
 impl Policy for ShieldedPolicy {

@@ -280,7 +280,16 @@ pub struct Table2Row {
     /// The shield alone: TTC with creep at 0 s behind it (not in the
     /// paper).
     pub shield_alone: Option<Cell>,
+    /// The shield alone with walls that hide nothing (`see_through=1`):
+    /// what the walls cost a shielded policy.
+    pub see_through: Option<Cell>,
+    /// The oracle ([`ORACLE`]): sees hidden cars and goes when going
+    /// reaches the goal in every one of its futures; the top of the ladder.
+    pub oracle: Option<Cell>,
 }
+
+/// The oracle of Table II's ladder: 16 futures per decision.
+pub const ORACLE: &str = "oracle:16";
 
 /// One training run and what it cost.
 #[derive(Debug, Clone, Serialize)]
@@ -550,18 +559,32 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
     };
     // A baseline at 0 s behind the shield: it goes whenever the shield
     // lets it (with the networks' columns).
-    let shield_alone = |scenario: &str, policy: &str, actions: ActionSet| {
+    let shield_alone_under = |scenario: &str,
+                              policy: &str,
+                              actions: ActionSet,
+                              params: ShieldParams|
+     -> anyhow::Result<Option<Cell>> {
         stop()?;
         if !plan.dqn {
             return Ok(None);
         }
-        let (policy, counters) = behind_shield(
-            crossroads_sim::parse_policy(policy)?,
-            ShieldParams::default(),
-        );
+        let (policy, counters) = behind_shield(crossroads_sim::parse_policy(policy)?, params);
         let name = policy.name();
         let sc = load_scenario(scenario)?;
         evaluate_policy(plan, &name, &sc, actions, policy.as_ref(), counters).map(Some)
+    };
+    let shield_alone = |scenario: &str, policy: &str, actions: ActionSet| {
+        shield_alone_under(scenario, policy, actions, ShieldParams::default())
+    };
+    // The top of Table II's ladder, on the same trials.
+    let oracle = |scenario: &str| -> anyhow::Result<Option<Cell>> {
+        stop()?;
+        if !plan.dqn {
+            return Ok(None);
+        }
+        let policy = crossroads_sim::parse_policy(ORACLE)?;
+        let sc = load_scenario(scenario)?;
+        evaluate_policy(plan, ORACLE, &sc, ActionSet::Creep, policy.as_ref(), None).map(Some)
     };
     // Table I's rows; Figure 3 plots the same cells.
     for &s in open_scenarios(plan) {
@@ -599,6 +622,16 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                 },
                 shielded: shielded("creep-occluded", &s, ActionSet::Creep)?,
                 shield_alone: shield_alone(&s, "ttc-creep:0", ActionSet::Creep)?,
+                see_through: shield_alone_under(
+                    &s,
+                    "ttc-creep:0",
+                    ActionSet::Creep,
+                    ShieldParams {
+                        see_through: true,
+                        ..ShieldParams::default()
+                    },
+                )?,
+                oracle: oracle(&s)?,
             });
         }
     }

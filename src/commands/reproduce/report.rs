@@ -175,13 +175,14 @@ fn table2_csv(r: &Results) -> String {
             let theirs = paper2(&paper::TABLE2[i][m]).map(Some);
             csv_cells(&mut out, &row.length_m, name, *cell, &theirs);
         }
-        csv_cells(
-            &mut out,
-            &row.length_m,
-            "dqn-creep+shield",
-            row.shielded.as_ref(),
-            &[None; 3],
-        );
+        for (name, cell) in [
+            ("dqn-creep+shield", row.shielded.as_ref()),
+            ("shield-alone", row.shield_alone.as_ref()),
+            ("shield-alone-see-through", row.see_through.as_ref()),
+            ("oracle", row.oracle.as_ref()),
+        ] {
+            csv_cells(&mut out, &row.length_m, name, cell, &[None; 3]);
+        }
     }
     out
 }
@@ -306,6 +307,7 @@ fn markdown(plan: &Plan, r: &Results) -> String {
         );
     }
     shortfalls_md(w, r);
+    ladder_md(w, r);
     shield_md(w, r);
     training_md(w, r);
     md
@@ -516,6 +518,64 @@ fn shortfalls_md(w: &mut String, r: &Results) {
         "Why, where we know: see NOTES.md next to a committed report, and the \
          simulator's calibration notes (`sim` crate docs).\n"
     );
+}
+
+/// Table II's cells against the best achievable on the same trials: the
+/// shield alone, the shield alone with walls that hide nothing, and the
+/// oracle that sees hidden cars; each cell's success in points below the
+/// oracle's.
+fn ladder_md(w: &mut String, r: &Results) {
+    if r.table2.iter().all(|row| row.oracle.is_none()) {
+        return;
+    }
+    let _ = writeln!(
+        w,
+        "## How far from the limit under occlusion\n\n\
+         On Table II's trials: the oracle (`--policy {} --actions creep`) sees the cars \
+         behind the walls and goes when going reaches the goal in every one of 16 futures \
+         of the present, else creeps to the creep limit and waits; the shield alone with \
+         transparent walls (`--shield see_through=1`) is the shield knowing every car but \
+         not the future; the shield alone is what the ego's own view allows under the \
+         shield's assumptions. \"Below the oracle\" is the success in points under the \
+         oracle's.\n\n\
+         | occlusion | policy | success % | collision % | time s | below the oracle |\n\
+         | --- | --- | --- | --- | --- | --- |",
+        super::ORACLE
+    );
+    for row in &r.table2 {
+        let Some(top) = row.oracle.as_ref() else {
+            continue;
+        };
+        let rungs = [
+            ("oracle", Some(top)),
+            ("shield alone, transparent walls", row.see_through.as_ref()),
+            ("shield alone", row.shield_alone.as_ref()),
+            ("DQN-Creep + shield", row.shielded.as_ref()),
+            ("DQN-Creep", row.creep.as_ref()),
+            ("TTC with creep", row.ttc_creep.as_ref()),
+            ("DQN-Sequential", row.sequential.as_ref()),
+            ("DQN-TTG", row.ttg.as_ref()),
+        ];
+        let mut first = true;
+        for (name, cell) in rungs {
+            let Some(c) = cell else { continue };
+            let label = if first {
+                format!("{} m", row.length_m)
+            } else {
+                String::new()
+            };
+            first = false;
+            let _ = writeln!(
+                w,
+                "| {label} | {name} | {:.2} | {:.2} | {} | {:.2} |",
+                c.success,
+                c.collision,
+                num(c.time, 2),
+                top.success - c.success
+            );
+        }
+    }
+    w.push('\n');
 }
 
 /// The shield section's rows of one table row: the network behind the

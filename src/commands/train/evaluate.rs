@@ -1,6 +1,7 @@
 //! The evaluations of a session: the learner's latest weights (or the
 //! newest checkpoint once it stopped) run greedily on the run's seeded
-//! trials in this process, appended to the curve, kept in `last/`,
+//! trials in this process (behind `actor.shield` when the actors act
+//! through it), appended to the curve, kept in `last/`,
 //! reported to the learner; a new best or a met target re-measured on
 //! `train.confirm_trials` and kept in `best/`; the weights that first
 //! confirm the target are also kept in `reached/`, which a later best does
@@ -12,7 +13,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use crossroads_sim::{EvalConfig, evaluate};
+use crossroads_sim::{EvalConfig, Policy, ShieldParams, ShieldedPolicy, evaluate};
 use indicatif::ProgressBar;
 
 use super::record::{Evaluation, Reached, write_atomic};
@@ -139,12 +140,20 @@ impl Session {
         version: u64,
         trials: u64,
     ) -> anyhow::Result<Evaluation> {
-        let policy = NetworkPolicy::from_safetensors(safetensors, format!("dqn@v{version}"))
+        let network = NetworkPolicy::from_safetensors(safetensors, format!("dqn@v{version}"))
             .context("the learner's weights")?;
+        // Behind the shield the actors act through (`actor.shield`).
+        let policy: Box<dyn Policy> = match self.run.config.actor.shield.as_deref() {
+            Some(spec) => Box::new(ShieldedPolicy::new(
+                Box::new(network),
+                ShieldParams::parse(spec).context("actor.shield")?,
+            )),
+            None => Box::new(network),
+        };
         let scenario = Arc::clone(&self.run.scenario);
         let eval = EvalConfig::new(self.run.actions, trials, self.run.config.train.eval_seed);
         let report = tokio::task::spawn_blocking(move || {
-            evaluate(&scenario, &policy, &eval, &|_| {}).map_err(anyhow::Error::from)
+            evaluate(&scenario, policy.as_ref(), &eval, &|_| {}).map_err(anyhow::Error::from)
         })
         .await
         .context("the evaluation thread")??;
