@@ -1,0 +1,333 @@
+//! Q(go) diagnosed before it is tuned: given the answer, can the network
+//! tell a safe moment to go from a doomed one?
+//!
+//! Every creep network undervalues *go* where going is safe (`crossroads
+//! eval --risk 16 --missed`: Q(go) medians of -2.5 to -4 at waits where
+//! going reached the goal in all 16 futures, for an outcome worth about
+//! +1). Either the learning signal is too thin (safe *go*s at a clear view
+//! are rare in the replay: data), or the observation does not hold what
+//! separates them (features). This probe tells which:
+//!
+//! 1. It drives `--episodes` episodes of `--scenario` with the network of
+//!    `--policy` (greedy, as `eval` does) and, at every `--every`-th
+//!    decision before a *go*, forks the environment `--futures` times (the same present,
+//!    hidden cars included, other random traffic from then on) and goes in
+//!    each: the mean discounted return of those *go*s is the label, the
+//!    value of *go* there under the true dynamics. A state is *safe* when
+//!    every fork reached the goal, *doomed* when more than half collided.
+//! 2. It trains a fresh network of the same shape (same trunk, same
+//!    observation) to regress its Q(go) on the labels of four fifths of the
+//!    episodes, with Adam, for `--updates` batches of `--batch`.
+//! 3. On the held-out fifth it compares the regression's Q(go) and the RL
+//!    network's with the labels: their medians at safe states (in view of
+//!    the conflicting lanes, as `--missed` counts them) and at doomed ones,
+//!    and how well each ranks safe above doomed (AUC).
+//!
+//! The verdict, fixed before the first run: **features** when the
+//! regression's AUC of safe over doomed is below 0.9, or its median Q(go)
+//! at held-out safe states in view is more than 1 below their median
+//! label (the observation cannot carry what the labels know); **data**
+//! when it reaches both while the RL network does not (the shape can learn
+//! it, the replay did not teach it).
+//!
+//! ```text
+//! cargo run --release -p crossroads-actor --example qgo_probe -- \
+//!     --policy reports/paper/runs/creep-occluded/best --episodes 2000
+//! ```
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use crossroads_model::QNetwork;
+use crossroads_sim::{ActionSet, Env, EnvConfig, Outcome, Scenario, episode_seed};
+use rayon::prelude::*;
+use tch::nn::OptimizerConfig;
+use tch::{Kind, Tensor};
+
+/// Seconds of a car at the speed limit a view must cover upstream on every
+/// conflicting lane to count as in view (`sim::risk`'s rule).
+const IN_VIEW_S: f64 = 5.0;
+
+#[derive(Debug)]
+struct Args {
+    policy: PathBuf,
+    scenario: String,
+    episodes: u64,
+    futures: u32,
+    seed: u64,
+    updates: usize,
+    batch: usize,
+    lr: f64,
+    every: u32,
+}
+
+fn parse_args() -> Args {
+    let mut a = Args {
+        policy: PathBuf::from("reports/paper/runs/creep-occluded/best"),
+        scenario: "occluded".to_owned(),
+        episodes: 2000,
+        futures: 16,
+        seed: 1,
+        updates: 20_000,
+        batch: 256,
+        lr: 1e-3,
+        every: 2,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        let value = it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+        let bad = |what: &str| -> ! { panic!("{flag} {value:?}: {what}") };
+        match flag.as_str() {
+            "--policy" => a.policy = PathBuf::from(value),
+            "--scenario" => a.scenario = value,
+            "--episodes" => a.episodes = value.parse().unwrap_or_else(|_| bad("a count")),
+            "--futures" => a.futures = value.parse().unwrap_or_else(|_| bad("a count")),
+            "--seed" => a.seed = value.parse().unwrap_or_else(|_| bad("a number")),
+            "--updates" => a.updates = value.parse().unwrap_or_else(|_| bad("a count")),
+            "--batch" => a.batch = value.parse().unwrap_or_else(|_| bad("a count")),
+            "--lr" => a.lr = value.parse().unwrap_or_else(|_| bad("a number")),
+            "--every" => a.every = value.parse().unwrap_or_else(|_| bad("a count")),
+            _ => panic!(
+                "unknown flag {flag}; known: --policy --scenario --episodes --futures --seed \
+                 --updates --batch --lr --every"
+            ),
+        }
+    }
+    a
+}
+
+/// One labelled decision.
+struct Sample {
+    episode: u64,
+    obs: Vec<f32>,
+    /// Mean discounted return of going now, over the forks.
+    label: f32,
+    safe: bool,
+    doomed: bool,
+    in_view: bool,
+    /// The RL network's Q(go) here.
+    q_go: f32,
+}
+
+/// Goes in `futures` forks of `env`: the mean return, whether every fork
+/// reached the goal, whether more than half collided.
+fn label(env: &Env, go: usize, futures: u32, base: u64) -> (f32, bool, bool) {
+    let runs: Vec<(f64, Option<Outcome>)> = (0..futures)
+        .into_par_iter()
+        .map(|j| {
+            let mut fork = env.fork(episode_seed(base, u64::from(j)));
+            let r = fork.step(go).expect("a fork steps");
+            (r.reward, fork.metrics().outcome)
+        })
+        .collect();
+    let n = f64::from(futures);
+    let mean = runs.iter().map(|r| r.0).sum::<f64>() / n;
+    let successes = runs
+        .iter()
+        .filter(|r| r.1 == Some(Outcome::Success))
+        .count();
+    let collisions = runs
+        .iter()
+        .filter(|r| r.1 == Some(Outcome::Collision))
+        .count();
+    (
+        mean as f32,
+        successes == futures as usize,
+        2 * collisions > futures as usize,
+    )
+}
+
+fn collect(a: &Args, net: &QNetwork, scenario: &Arc<Scenario>, go: usize) -> Vec<Sample> {
+    let mut out = Vec::new();
+    let mut env = Env::new(
+        Arc::clone(scenario),
+        EnvConfig::for_actions(ActionSet::Creep),
+    );
+    let len = env.obs_spec().len();
+    let mut obs = vec![0.0f32; len];
+    let view = IN_VIEW_S * scenario.spec().speed_limit;
+    for e in 0..a.episodes {
+        env.reset(episode_seed(a.seed, e));
+        let mut decision = 0u32;
+        while !env.is_done() {
+            env.write_observation(&mut obs).expect("observation");
+            let q = net.infer(&obs, 1).expect("forward pass");
+            let q = q.row(0);
+            if decision % a.every.max(1) == 0 {
+                let base = !episode_seed(a.seed ^ 0x9E0, e * 10_000 + u64::from(env.steps()));
+                let (label, safe, doomed) = label(&env, go, a.futures, base);
+                out.push(Sample {
+                    episode: e,
+                    obs: obs.clone(),
+                    label,
+                    safe,
+                    doomed,
+                    in_view: env.sees_conflicts(view),
+                    q_go: q[go],
+                });
+            }
+            decision += 1;
+            let action = q
+                .iter()
+                .enumerate()
+                .max_by(|x, y| x.1.total_cmp(y.1))
+                .map_or(0, |(i, _)| i);
+            env.step(action).expect("step");
+        }
+        if (e + 1) % 200 == 0 {
+            eprintln!("  {} episodes, {} decisions labelled", e + 1, out.len());
+        }
+    }
+    out
+}
+
+fn train(a: &Args, net: &QNetwork, train: &[&Sample], go: usize) -> QNetwork {
+    let fresh = QNetwork::new(net.spec().clone(), a.seed).expect("network");
+    let mut opt = tch::nn::Adam::default()
+        .build(fresh.var_store(), a.lr)
+        .expect("optimizer");
+    let len = train[0].obs.len();
+    let mut rng = a.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut next = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        rng
+    };
+    let mut flat = vec![0.0f32; a.batch * len];
+    let mut targets = vec![0.0f32; a.batch];
+    for u in 0..a.updates {
+        for k in 0..a.batch {
+            let s = train[(next() % train.len() as u64) as usize];
+            flat[k * len..(k + 1) * len].copy_from_slice(&s.obs);
+            targets[k] = s.label;
+        }
+        let x = Tensor::from_slice(&flat).view([a.batch as i64, len as i64]);
+        let y = Tensor::from_slice(&targets);
+        let q = fresh.q_values(&x).expect("forward").select(1, go as i64);
+        let loss = (q - y).square().mean(Kind::Float);
+        opt.backward_step(&loss);
+        if (u + 1) % 5_000 == 0 {
+            eprintln!("  update {}: mse {:.4}", u + 1, loss.double_value(&[]));
+        }
+    }
+    fresh
+}
+
+fn median(mut v: Vec<f32>) -> f32 {
+    if v.is_empty() {
+        return f32::NAN;
+    }
+    v.sort_by(f32::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Probability that a random safe state scores above a random doomed one.
+fn auc(safe: &[f32], doomed: &[f32]) -> f64 {
+    if safe.is_empty() || doomed.is_empty() {
+        return f64::NAN;
+    }
+    let mut d = doomed.to_vec();
+    d.sort_by(f32::total_cmp);
+    let mut wins = 0.0;
+    for &s in safe {
+        let below = d.partition_point(|&x| x < s);
+        let equal = d[below..].partition_point(|&x| x <= s);
+        wins += below as f64 + 0.5 * equal as f64;
+    }
+    wins / (safe.len() as f64 * d.len() as f64)
+}
+
+fn main() {
+    let a = parse_args();
+    let file = if a.policy.is_dir() {
+        a.policy.join("weights.safetensors")
+    } else {
+        a.policy.clone()
+    };
+    let bytes = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+    let (net, version) = QNetwork::from_safetensors(&bytes).expect("a network");
+    let scenario = Arc::new(Scenario::load(&a.scenario).expect("scenario"));
+    let go = ActionSet::Creep.absorbing_go().expect("creep has a go");
+    eprintln!(
+        "qgo_probe: {} (v{version}) on {}, {} episodes, {} futures per decision",
+        file.display(),
+        a.scenario,
+        a.episodes,
+        a.futures
+    );
+    let samples = collect(&a, &net, &scenario, go);
+    let (held, fit): (Vec<&Sample>, Vec<&Sample>) =
+        samples.iter().partition(|s| s.episode % 5 == 0);
+    eprintln!(
+        "  {} decisions: {} to fit, {} held out",
+        samples.len(),
+        fit.len(),
+        held.len()
+    );
+    let regression = train(&a, &net, &fit, go);
+    let len = held[0].obs.len();
+    let flat: Vec<f32> = held.iter().flat_map(|s| s.obs.iter().copied()).collect();
+    let predicted: Vec<f32> = tch::no_grad(|| {
+        let x = Tensor::from_slice(&flat).view([held.len() as i64, len as i64]);
+        let q = regression
+            .q_values(&x)
+            .expect("forward")
+            .select(1, go as i64);
+        Vec::<f32>::try_from(&q).expect("values")
+    });
+    let pick = |f: &dyn Fn(&Sample) -> bool, v: &dyn Fn(usize) -> f32| -> Vec<f32> {
+        (0..held.len()).filter(|&i| f(held[i])).map(v).collect()
+    };
+    let safe_in_view = |s: &Sample| s.safe && s.in_view;
+    let safe = |s: &Sample| s.safe;
+    let doomed = |s: &Sample| s.doomed;
+    let label_of = |i: usize| held[i].label;
+    let reg = |i: usize| predicted[i];
+    let rl = |i: usize| held[i].q_go;
+    let mse = |v: &dyn Fn(usize) -> f32| -> f64 {
+        (0..held.len())
+            .map(|i| f64::from(v(i) - held[i].label).powi(2))
+            .sum::<f64>()
+            / held.len() as f64
+    };
+    let mean_label = held.iter().map(|s| f64::from(s.label)).sum::<f64>() / held.len() as f64;
+    let variance = held
+        .iter()
+        .map(|s| (f64::from(s.label) - mean_label).powi(2))
+        .sum::<f64>()
+        / held.len() as f64;
+    println!(
+        "held out: {} decisions, {} safe ({} in view), {} doomed; label variance {variance:.3}",
+        held.len(),
+        pick(&safe, &label_of).len(),
+        pick(&safe_in_view, &label_of).len(),
+        pick(&doomed, &label_of).len()
+    );
+    println!(
+        "| Q(go) | median at safe in view | at safe | at doomed | AUC safe > doomed | MSE vs label |"
+    );
+    println!("| --- | ---: | ---: | ---: | ---: | ---: |");
+    for (name, v) in [
+        ("label (16 futures)", &label_of as &dyn Fn(usize) -> f32),
+        ("regression", &reg),
+        ("RL network", &rl),
+    ] {
+        println!(
+            "| {name} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            median(pick(&safe_in_view, v)),
+            median(pick(&safe, v)),
+            median(pick(&doomed, v)),
+            auc(&pick(&safe, v), &pick(&doomed, v)),
+            mse(v)
+        );
+    }
+    let reg_auc = auc(&pick(&safe, &reg), &pick(&doomed, &reg));
+    let gap = median(pick(&safe_in_view, &label_of)) - median(pick(&safe_in_view, &reg));
+    let verdict = if reg_auc < 0.9 || gap > 1.0 {
+        "features: the regression cannot separate what the labels know"
+    } else {
+        "data: the network's shape learns Q(go) from the labels; the replay did not teach it"
+    };
+    println!("verdict: {verdict} (regression AUC {reg_auc:.3}, safe-in-view median gap {gap:.3})");
+}
