@@ -153,7 +153,7 @@ fn collect(a: &Args, net: &QNetwork, scenario: &Arc<Scenario>, go: usize) -> Vec
             env.write_observation(&mut obs).expect("observation");
             let q = net.infer(&obs, 1).expect("forward pass");
             let q = q.row(0);
-            if decision % a.every.max(1) == 0 {
+            if decision.is_multiple_of(a.every.max(1)) {
                 let base = !episode_seed(a.seed ^ 0x9E0, e * 10_000 + u64::from(env.steps()));
                 let (label, safe, doomed) = label(&env, go, a.futures, base);
                 out.push(Sample {
@@ -174,7 +174,7 @@ fn collect(a: &Args, net: &QNetwork, scenario: &Arc<Scenario>, go: usize) -> Vec
                 .map_or(0, |(i, _)| i);
             env.step(action).expect("step");
         }
-        if (e + 1) % 200 == 0 {
+        if (e + 1).is_multiple_of(200) {
             eprintln!("  {} episodes, {} decisions labelled", e + 1, out.len());
         }
     }
@@ -207,7 +207,7 @@ fn train(a: &Args, net: &QNetwork, train: &[&Sample], go: usize) -> QNetwork {
         let q = fresh.q_values(&x).expect("forward").select(1, go as i64);
         let loss = (q - y).square().mean(Kind::Float);
         opt.backward_step(&loss);
-        if (u + 1) % 5_000 == 0 {
+        if (u + 1).is_multiple_of(5_000) {
             eprintln!("  update {}: mse {:.4}", u + 1, loss.double_value(&[]));
         }
     }
