@@ -507,8 +507,8 @@ pub struct PolicyArgs {
     pub scenario: String,
     /// Who drives the traffic: sumo (SUMO's drivers, the paper's), human
     /// (reaction 0.7-1.5 s and the rest as measured on roads;
-    /// docs/drivers.md), or a drivers TOML file [default: the scenario's
-    /// own].
+    /// docs/drivers.md), mixed (half each), or a drivers TOML file
+    /// [default: the scenario's own].
     #[arg(long, value_name = "PRESET|FILE")]
     pub drivers: Option<String>,
     /// Action set the policy drives: ttg, creep or sequential [default: a
@@ -579,7 +579,7 @@ pub struct TuneTtcArgs {
     /// Scenario name or scenario TOML file.
     #[arg(long, default_value = "left")]
     pub scenario: String,
-    /// Who drives the traffic: sumo, human or a drivers TOML file
+    /// Who drives the traffic: sumo, human, mixed or a drivers TOML file
     /// [default: the scenario's own]; the paper's rule then tunes TTC for
     /// that population.
     #[arg(long, value_name = "PRESET|FILE")]
@@ -626,7 +626,7 @@ pub struct SumoCheckArgs {
     /// position in the list).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Comma-separated driver populations, each a preset (sumo, human) or
+    /// Comma-separated driver populations, each a preset (sumo, human, mixed) or
     /// a drivers TOML file; every scenario runs under each, SUMO drawing
     /// each car's vehicle type from the same bounds (docs/drivers.md gives
     /// the mapping) [default: sumo,human].

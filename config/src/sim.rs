@@ -22,7 +22,7 @@ pub struct SimConfig {
     pub action_set: String,
     /// Who drives the traffic: a preset (`sumo`: SUMO's drivers, the
     /// paper's; `human`: reaction 0.7-1.5 s and the rest as measured on
-    /// roads, docs/drivers.md) or a drivers TOML file. Unset: the
+    /// roads, docs/drivers.md; `mixed`: half each) or a drivers TOML file. Unset: the
     /// scenario's own (its `[drivers]` table, else `sumo`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub drivers: Option<String>,

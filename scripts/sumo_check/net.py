@@ -97,7 +97,9 @@ def traffic_types(export, seed=0):
     - the speed factor bounds are already in `traffic` (normc);
     - an inattentive share: each drawn type also comes as a copy that
       ignores the ego at the junction (IGNORES_EGO), drawn that share of
-      the time.
+      the time;
+    - a SUMO share (`sumo_share`): the scenario's own driver, undrawn, that
+      share of the time, the drawn types sharing the rest.
     """
     t = export["traffic"]
     d = export.get("drivers") or {}
@@ -123,7 +125,14 @@ def traffic_types(export, seed=0):
     def draw(bound, own):
         return own if bound is None else rng.uniform(bound[0], bound[1])
 
+    own = float(d.get("sumo_share") or 0.0)
     out = ['  <vTypeDistribution id="car">\n']
+    if own > 0.0:
+        out.append(
+            f'    <vType id="carown" {base} decel="{t["decel"]}" '
+            f'emergencyDecel="{t["emergency_decel"]}" tau="{t["tau"]}" '
+            f'probability="{own:.6f}"' + ("" if reacts else IGNORES_EGO) + "/>\n"
+        )
     for i in range(DRIVER_TYPES):
         r = draw(d.get("reaction_s"), t["reaction_delay_s"])
         emergency = draw(d.get("emergency_decel"), t["emergency_decel"])
@@ -138,7 +147,8 @@ def traffic_types(export, seed=0):
         for suffix, weight, ignores in (("", 1.0 - share, not reacts), ("i", share, True)):
             if weight > 0.0:
                 out.append(
-                    f'    <vType id="car{i}{suffix}" {kind} probability="{weight / DRIVER_TYPES:.6f}"'
+                    f'    <vType id="car{i}{suffix}" {kind} '
+                    f'probability="{(1.0 - own) * weight / DRIVER_TYPES:.6f}"'
                     + (IGNORES_EGO if ignores else "") + "/>\n"
                 )
     out.append("  </vTypeDistribution>\n")

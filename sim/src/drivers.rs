@@ -102,18 +102,35 @@ pub struct DriverPopulation {
     /// neither give way nor brake for it until it is in their lane ahead
     /// of them, where they follow it as any leader. In [0, 1].
     pub inattentive_share: f64,
+    /// Share of drivers who are the scenario's own (`[traffic]`: SUMO's in
+    /// the built-in scenarios) rather than drawn from the bounds above, so
+    /// one population can hold both. In [0, 1]; 0 draws every driver.
+    pub sumo_share: f64,
 }
 
 /// The names of the presets, for help and errors.
-pub const PRESETS: [&str; 2] = ["sumo", "human"];
+pub const PRESETS: [&str; 3] = ["sumo", "human", "mixed"];
 
 impl DriverPopulation {
-    /// A preset by name: `sumo` or `human`.
+    /// A preset by name: `sumo`, `human` or `mixed`.
     pub fn preset(name: &str) -> Option<Self> {
         match name {
             "sumo" => Some(Self::default()),
             "human" => Some(Self::human()),
+            "mixed" => Some(Self::mixed()),
             _ => None,
+        }
+    }
+
+    /// Half the drivers SUMO's (the scenario's own), half drawn as
+    /// [`DriverPopulation::human`]: a population to train on, so a network
+    /// meets both the drivers the paper simulated and those on real roads.
+    /// Its bounds are the human ones (SUMO's driver lies inside each), so
+    /// the shield assumes the same of it as of `human`.
+    pub fn mixed() -> Self {
+        Self {
+            sumo_share: 0.5,
+            ..Self::human()
         }
     }
 
@@ -132,6 +149,7 @@ impl DriverPopulation {
             speed_factor_dev: Some(0.15),
             speed_factor_max: Some(1.45),
             inattentive_share: 0.0,
+            sumo_share: 0.0,
         }
     }
 
@@ -177,7 +195,8 @@ impl DriverPopulation {
             && self
                 .speed_factor_max
                 .is_none_or(|m| m.is_finite() && m > 0.0)
-            && (0.0..=1.0).contains(&self.inattentive_share);
+            && (0.0..=1.0).contains(&self.inattentive_share)
+            && (0.0..=1.0).contains(&self.sumo_share);
         if ok {
             Ok(())
         } else {
@@ -185,7 +204,7 @@ impl DriverPopulation {
                 what,
                 "driver bounds out of range: [min, max] with min <= max, brakings and \
                  headways above 0, reactions and speed factor spread at least 0, \
-                 inattentive_share in [0, 1]",
+                 inattentive_share and sumo_share in [0, 1]",
             ))
         }
     }
@@ -211,10 +230,13 @@ impl DriverPopulation {
         p
     }
 
-    /// One car's driver, drawn from `rng`; `None` when every car gets the
-    /// scenario's driver.
+    /// One car's driver, drawn from `rng`; `None` when the car gets the
+    /// scenario's driver (every car, or its `sumo_share`).
     pub fn draw(&self, p: &TrafficParams, rng: &mut impl Rng) -> Option<Driver> {
         if self.is_uniform() {
+            return None;
+        }
+        if self.sumo_share > 0.0 && rng.random::<f64>() < self.sumo_share {
             return None;
         }
         let mut pick = |b: Option<Bounds>, own: f64| b.map_or(own, |b| b.draw(rng));
@@ -256,6 +278,9 @@ impl std::fmt::Display for DriverPopulation {
         }
         if self.inattentive_share > 0.0 {
             parts.push(format!("inattentive {} %", 100.0 * self.inattentive_share));
+        }
+        if self.sumo_share > 0.0 && !parts.is_empty() {
+            parts.push(format!("SUMO's drivers {} %", 100.0 * self.sumo_share));
         }
         if parts.is_empty() {
             f.write_str("sumo (every car the scenario's [traffic] driver)")
@@ -382,6 +407,34 @@ mod tests {
         let rate = inattentive as f64 / n as f64;
         // Binomial standard error at 10 %: 0.21 points.
         assert!((rate - 0.1).abs() < 0.01, "{rate}");
+    }
+
+    #[test]
+    fn a_mixed_population_keeps_sumos_driver_for_its_share() {
+        let mixed = DriverPopulation::preset("mixed").expect("mixed");
+        assert!(!mixed.is_uniform());
+        let p = TrafficParams::default();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        let n = 20_000;
+        let drawn: Vec<Option<Driver>> = (0..n).map(|_| mixed.draw(&p, &mut rng)).collect();
+        let sumo = drawn.iter().filter(|d| d.is_none()).count();
+        let rate = sumo as f64 / n as f64;
+        // Binomial standard error at 50 %: 0.35 points.
+        assert!((rate - 0.5).abs() < 0.015, "{rate}");
+        assert!(
+            drawn
+                .iter()
+                .flatten()
+                .all(|d| (0.7..=1.5).contains(&d.reaction_s)),
+            "the others are human"
+        );
+        assert!(mixed.to_string().contains("SUMO's drivers 50 %"), "{mixed}");
+        let bad = DriverPopulation {
+            sumo_share: 1.5,
+            ..DriverPopulation::human()
+        };
+        let e = bad.check("drivers x").expect_err("refused").to_string();
+        assert!(e.contains("sumo_share"), "{e}");
     }
 
     #[test]
