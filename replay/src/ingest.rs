@@ -12,9 +12,12 @@
 //! takes every waiting sample into a queue per publisher and inserts one
 //! batch of each in turn; the publishers' own limit on unacknowledged
 //! batches (`actor.in_flight`) bounds those queues and is where they feel
-//! the back-pressure. Every batch is answered on `<prefix>/replay/<table>/acks` once
-//! stored or rejected. At shutdown the queue is drained into the tables,
-//! whatever the rate limiter says, before the server's last snapshot.
+//! the back-pressure. Batches take the insert path of gRPC's
+//! ([`crate::insert`]), and the thread goes on with the next while the
+//! write-ahead log syncs. Every batch is answered on
+//! `<prefix>/replay/<table>/acks` once stored or rejected. At shutdown the
+//! queue is drained into the tables, whatever the rate limiter says,
+//! before the server's last snapshot.
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -25,10 +28,10 @@ use crossroads_config::TransportConfig;
 use crossroads_transport::shm::{self, ShmError};
 use crossroads_types::batch::{BatchError, RejectReason, ValidBatch};
 
+use crate::insert::{Admission, InFlight, InsertError};
 use crate::metrics::Transport;
 use crate::service::State;
 use crate::table::{PreparedBatch, Table, TableError};
-use crate::wal::Pending;
 
 /// How long the thread sleeps when every queue is empty.
 const IDLE: Duration = Duration::from_millis(1);
@@ -100,42 +103,47 @@ impl ShmIngest {
                 // Acknowledgements waiting for the write-ahead log, oldest
                 // first: the thread goes on inserting meanwhile, so one
                 // fsync covers many batches (as for gRPC).
-                let acknowledge_durable = |port: &Port, waiting: &mut VecDeque<Waiting>, block: bool| {
-                    while let Some(w) = waiting.front_mut() {
-                        let durable = if block {
-                            Some(std::mem::replace(&mut w.pending, Pending::done()).wait_durable())
-                        } else {
-                            w.pending.try_durable()
+                let acknowledge = |port: &Port, waiting: &mut VecDeque<Waiting>, block: bool| {
+                    while let Some(w) = waiting.pop_front() {
+                        let (origin, batch_id) = (w.origin, w.batch_id);
+                        let outcome = match w.flight.try_finish(block) {
+                            Ok(outcome) => outcome,
+                            Err(flight) => {
+                                waiting.push_front(Waiting {
+                                    origin,
+                                    batch_id,
+                                    flight,
+                                });
+                                break;
+                            }
                         };
-                        let Some(durable) = durable else { break };
-                        let outcome = durable.map(|()| w.stored).map_err(|e| {
-                            state.metrics.reject(RejectReason::Unavailable);
-                            tracing::error!(table = port.table.name(), batch_id = w.batch_id, error = %e,
-                                "a shared-memory batch is in the table but not durable; not acknowledged");
-                            RejectReason::Unavailable
-                        });
-                        send(port, w.origin, w.batch_id, outcome);
-                        waiting.pop_front();
+                        let outcome = outcome
+                            .map(|done| (done.inserted, done.size))
+                            .map_err(|e| refused(&state, &port.table, batch_id, e));
+                        send(port, origin, batch_id, outcome);
                     }
                 };
-                let serve = |port: &Port, queue: &mut FairQueue, waiting: &mut VecDeque<Waiting>, draining: bool| -> bool {
-                    acknowledge_durable(port, waiting, false);
-                    queue.take_all(&port.subscriber);
-                    let Some(r) = queue.next() else {
-                        return false;
+                let serve =
+                    |port: &Port, queue: &mut FairQueue, waiting: &mut VecDeque<Waiting>| -> bool {
+                        acknowledge(port, waiting, false);
+                        queue.take_all(&port.subscriber);
+                        let Some(r) = queue.next() else {
+                            return false;
+                        };
+                        match handle(&state, &runtime, &port.table, r.read) {
+                            Ok(flight) => {
+                                waiting.push_back(Waiting {
+                                    origin: r.origin,
+                                    batch_id: r.batch_id,
+                                    flight,
+                                });
+                                // Stored already with the log off: answered now.
+                                acknowledge(port, waiting, false);
+                            }
+                            Err(reason) => send(port, r.origin, r.batch_id, Err(reason)),
+                        }
+                        true
                     };
-                    match handle(&state, &runtime, &port.table, r.read, draining) {
-                        (outcome, None) => send(port, r.origin, r.batch_id, outcome),
-                        (Ok(stored), Some(pending)) => waiting.push_back(Waiting {
-                            origin: r.origin,
-                            batch_id: r.batch_id,
-                            stored,
-                            pending,
-                        }),
-                        (Err(reason), Some(_)) => send(port, r.origin, r.batch_id, Err(reason)),
-                    }
-                    true
-                };
                 let mut queues: Vec<(FairQueue, VecDeque<Waiting>)> = subscribers
                     .iter()
                     .map(|_| (FairQueue::default(), VecDeque::new()))
@@ -143,15 +151,15 @@ impl ShmIngest {
                 while !state.shutdown.is_triggered() {
                     let mut busy = false;
                     for (port, (queue, waiting)) in subscribers.iter().zip(&mut queues) {
-                        busy |= serve(port, queue, waiting, false);
+                        busy |= serve(port, queue, waiting);
                     }
                     if !busy {
                         std::thread::sleep(IDLE);
                     }
                 }
                 for (port, (queue, waiting)) in subscribers.iter().zip(&mut queues) {
-                    while serve(port, queue, waiting, true) {}
-                    acknowledge_durable(port, waiting, true);
+                    while serve(port, queue, waiting) {}
+                    acknowledge(port, waiting, true);
                 }
             })
             .map_err(|e| ShmError::iceoryx("starting the ingest thread", e))?;
@@ -250,13 +258,11 @@ impl FairQueue {
     }
 }
 
-/// A stored batch whose acknowledgement waits for the write-ahead log.
+/// An admitted batch whose acknowledgement waits for the write-ahead log.
 struct Waiting {
     origin: u128,
     batch_id: u64,
-    /// `(inserted, table size)`, acknowledged once durable.
-    stored: (u32, u64),
-    pending: Pending,
+    flight: InFlight,
 }
 
 /// One table's shared-memory ports.
@@ -274,67 +280,64 @@ struct Port {
 }
 
 /// Checks the table and size of one received (validated) batch, prepares
-/// and inserts it; counts and logs
-/// rejections. Returns what to acknowledge: `(inserted, table size)` or
-/// the rejection's reason, and, with the write-ahead log on, the record to
-/// wait for before acknowledging a stored batch.
+/// it and begins its insert, waiting for the rate limiter as long as it
+/// takes (at once while draining at shutdown); counts and logs
+/// rejections. Returns the insert to acknowledge once finished, or the
+/// rejection's reason.
 fn handle(
     state: &State,
     runtime: &tokio::runtime::Handle,
     table: &Arc<Table>,
     read: Result<(String, u64, ValidBatch), BatchError>,
-    draining: bool,
-) -> (Result<(u32, u64), RejectReason>, Option<Pending>) {
-    let reject = |e: BatchError| {
-        state.metrics.reject(e.reason);
-        tracing::warn!(table = table.name(), reason = %e.reason, error = %e, "rejected a shared-memory batch");
-        (Err(e.reason), None)
-    };
-    let (name, batch_id, batch) = match read {
-        Ok(ok) => ok,
-        Err(e) => return reject(e),
-    };
+) -> Result<InFlight, RejectReason> {
+    let (name, batch_id, batch) = read.map_err(|e| rejected(state, table, &e))?;
     if name != table.name() {
-        return reject(BatchError::new(
-            RejectReason::UnknownTable,
-            "table",
-            format!("{name:?} sent on the service of table {:?}", table.name()),
+        return Err(rejected(
+            state,
+            table,
+            &BatchError::new(
+                RejectReason::UnknownTable,
+                "table",
+                format!("{name:?} sent on the service of table {:?}", table.name()),
+            ),
         ));
     }
-    if let Err(e) = state.limits.check_batch("actions", batch.len()) {
-        return reject(e);
-    }
+    state
+        .limits
+        .check_batch("actions", batch.len())
+        .map_err(|e| rejected(state, table, &e))?;
     let prepared = PreparedBatch::new(batch);
-    if let Err(e) = state.check_durable() {
-        state.metrics.reject(RejectReason::Unavailable);
-        tracing::warn!(table = table.name(), batch_id, error = %e, "refused a shared-memory batch");
-        return (Err(RejectReason::Unavailable), None);
-    }
-    let mut now = draining;
-    loop {
-        let outcome = if now {
-            table.insert_now(&prepared)
-        } else {
-            runtime.block_on(table.insert(&prepared, state.limits.insert_timeout, &state.shutdown))
-        };
-        match outcome {
-            Ok(done) => {
-                table
-                    .metrics()
-                    .inserted(Transport::Shm, u64::from(done.inserted));
-                let pending = state.log(table, &prepared, &done);
-                return (Ok((done.inserted, done.size)), pending);
-            }
-            // Keep the batch and keep waiting: the full queue pushes back on
-            // the publishers meanwhile.
-            Err(TableError::Timeout { .. }) => continue,
-            // Received, so stored: the last snapshot comes after this.
-            Err(TableError::ShuttingDown) => now = true,
-            Err(TableError::Invalid(e)) => return reject(e),
-            Err(e) => {
-                tracing::error!(table = table.name(), batch_id, error = %e, "inserting a shared-memory batch");
-                return (Err(RejectReason::BadRequest), None);
-            }
+    runtime
+        .block_on(state.begin_insert(table, prepared, Transport::Shm, Admission::Patient))
+        .map_err(|e| refused(state, table, batch_id, e))
+}
+
+/// Counts and logs an invalid shared-memory batch; its reason answers it.
+fn rejected(state: &State, table: &Table, e: &BatchError) -> RejectReason {
+    state.metrics.reject(e.reason);
+    tracing::warn!(table = table.name(), reason = %e.reason, error = %e, "rejected a shared-memory batch");
+    e.reason
+}
+
+/// Counts and logs a shared-memory insert that stored nothing; the reason
+/// answers it.
+fn refused(state: &State, table: &Table, batch_id: u64, e: InsertError) -> RejectReason {
+    match e {
+        InsertError::LogDown(e) => {
+            state.metrics.reject(RejectReason::Unavailable);
+            tracing::warn!(table = table.name(), batch_id, error = %e, "refused a shared-memory batch");
+            RejectReason::Unavailable
+        }
+        InsertError::NotDurable(e) => {
+            state.metrics.reject(RejectReason::Unavailable);
+            tracing::error!(table = table.name(), batch_id, error = %e,
+                "a shared-memory batch's write-ahead-log record failed; nothing stored, not acknowledged");
+            RejectReason::Unavailable
+        }
+        InsertError::Table(TableError::Invalid(e)) => rejected(state, table, &e),
+        InsertError::Table(e) => {
+            tracing::error!(table = table.name(), batch_id, error = %e, "inserting a shared-memory batch");
+            RejectReason::BadRequest
         }
     }
 }

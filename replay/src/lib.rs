@@ -10,7 +10,9 @@
 //! insert durable between snapshots. The server ([`server::start`], [`server::run`]) serves
 //! the tables over gRPC (the `service` module, the tonic service) and takes
 //! batches from actors on the same host over iceoryx2 (the `ingest`
-//! module), with the `crossroads_replay_*` metrics of [`metrics`].
+//! module), with the `crossroads_replay_*` metrics of [`metrics`]. Both
+//! transports insert through one path (the `insert` module): a table
+//! [`Reservation`] first, then the log, then the table.
 //! [`bench`](mod@bench) measures inserts, samples and bytes per stored
 //! transition.
 //!
@@ -24,7 +26,9 @@
 pub mod bench;
 pub mod compact;
 mod ingest;
+mod insert;
 pub mod metrics;
+mod prepared_batch;
 pub mod rate_limiter;
 pub mod roster;
 pub mod server;
@@ -33,8 +37,11 @@ pub mod snapshot;
 pub mod storage;
 pub mod sum_tree;
 pub mod table;
+mod table_image;
 pub mod wal;
 
 pub use metrics::{ReplayMetrics, TableMetrics};
 pub use server::{RunningServer, ServerError, run, start};
-pub use table::{PreparedBatch, Table, TableConfig, TableError, TableImage, TableStats};
+pub use table::{
+    PreparedBatch, Reservation, Table, TableConfig, TableError, TableImage, TableStats,
+};

@@ -146,15 +146,25 @@ impl RateLimiter {
 
     /// Whether an insert may proceed now.
     pub fn can_insert(&self) -> bool {
+        self.can_insert_after(0)
+    }
+
+    /// Whether an insert may proceed once `pending` items, admitted but
+    /// not counted yet, are. A table admits a batch before its
+    /// write-ahead-log record is durable and counts it once stored; the
+    /// batches in between count against the ratio, so concurrent inserts
+    /// overshoot it by one batch, as sequential ones do, not by one each.
+    pub fn can_insert_after(&self, pending: u64) -> bool {
         let r = self.config.samples_per_insert;
-        if r == 0.0 || self.inserts < self.config.min_size_to_sample {
+        if r == 0.0 || self.inserts.saturating_add(pending) < self.config.min_size_to_sample {
             return true;
         }
+        let pending = pending as f64;
         if let Some(ramp) = &self.config.ramp {
-            let (gap, tolerance) = self.ramp_gap(ramp, 1.0, 0.0);
+            let (gap, tolerance) = self.ramp_gap(ramp, pending + 1.0, 0.0);
             return gap <= self.config.min_size_to_sample as f64 + tolerance;
         }
-        self.gap() + r <= self.bounds().1
+        self.gap() + (pending + 1.0) * r <= self.bounds().1
     }
 
     /// Whether a sample may proceed now.
@@ -348,6 +358,25 @@ mod tests {
         assert!(l.can_sample());
         l.sampled(2); // gap 22
         assert!(l.can_insert());
+    }
+
+    #[test]
+    fn items_admitted_but_not_counted_yet_hold_back_inserts() {
+        // Two samples per insert, drift of 4 samples either way, from 10.
+        let mut l = limiter(10, 2.0, 4.0);
+        l.inserted(10);
+        // gap 20, bounds [16, 24]: one more item fits, two do not.
+        assert!(l.can_insert() && l.can_insert_after(1));
+        assert!(
+            !l.can_insert_after(2),
+            "two pending and one more would reach 26 > 24"
+        );
+        // Below the minimum size nothing holds inserts back.
+        let fresh = limiter(10, 2.0, 4.0);
+        assert!(fresh.can_insert_after(9));
+        let mut ramp = ramped(10, 2.0, 2.0, 100, 200, 4.0);
+        ramp.inserted(10);
+        assert!(ramp.can_insert_after(1) && !ramp.can_insert_after(2));
     }
 
     #[test]

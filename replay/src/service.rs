@@ -25,11 +25,12 @@ use tokio_stream::wrappers::ReceiverStream;
 use tokio_util::task::TaskTracker;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::insert::{Admission, InsertError};
 use crate::metrics::{ReplayMetrics, Transport};
 use crate::roster::Roster;
 use crate::snapshot::Snapshots;
-use crate::table::{Inserted, PreparedBatch, Table, TableError};
-use crate::wal::{Pending, Wal, WalError};
+use crate::table::{PreparedBatch, Table, TableError};
+use crate::wal::{Wal, WalError};
 
 /// Longest wait a sample request may ask for.
 const MAX_SAMPLE_WAIT: Duration = Duration::from_secs(600);
@@ -152,25 +153,29 @@ impl State {
         self.wal.as_ref().map_or(Ok(()), |w| w.check_writable())
     }
 
-    /// Puts an inserted batch in the write-ahead log (when on); wait on
-    /// the answer before acknowledging.
-    pub(crate) fn log(
-        &self,
-        table: &Table,
-        batch: &PreparedBatch,
-        done: &Inserted,
-    ) -> Option<Pending> {
-        self.wal
-            .as_ref()
-            .map(|w| w.append(table.name(), batch, done.first_key))
-    }
-
     fn status(&self, e: TableError) -> Status {
         match e {
             TableError::Invalid(e) => self.reject(&e),
             TableError::Timeout { .. } => Status::deadline_exceeded(e.to_string()),
             TableError::ShuttingDown => Status::unavailable(e.to_string()),
             TableError::Corrupt(_) => Status::data_loss(e.to_string()),
+        }
+    }
+
+    /// An insert that stored nothing, as a status; refusals are counted.
+    fn insert_status(&self, e: InsertError) -> Status {
+        match e {
+            InsertError::LogDown(e) => {
+                self.metrics.reject(RejectReason::Unavailable);
+                Status::unavailable(e.to_string())
+            }
+            InsertError::NotDurable(e) => {
+                self.metrics.reject(RejectReason::Unavailable);
+                Status::unavailable(format!(
+                    "{e}; nothing stored, so not acknowledged: send the batch again"
+                ))
+            }
+            InsertError::Table(e) => self.status(e),
         }
     }
 
@@ -189,25 +194,13 @@ impl State {
         )?;
         let batch = self.accept(wire::batch_from_wire(batch).map_err(|e| e.within("batch")))?;
         let prepared = PreparedBatch::new(batch);
-        self.check_durable().map_err(|e| {
-            self.metrics.reject(RejectReason::Unavailable);
-            Status::unavailable(e.to_string())
-        })?;
-        let done = table
-            .insert(&prepared, self.limits.insert_timeout, &self.shutdown)
+        let done = self
+            .begin_insert(table, prepared, Transport::Grpc, Admission::Timeout)
             .await
-            .map_err(|e| self.status(e))?;
-        if let Some(pending) = self.log(table, &prepared, &done) {
-            pending.durable().await.map_err(|e| {
-                self.metrics.reject(RejectReason::Unavailable);
-                Status::unavailable(format!(
-                    "{e}; the batch is in the table but not durable, so not acknowledged"
-                ))
-            })?;
-        }
-        table
-            .metrics()
-            .inserted(Transport::Grpc, u64::from(done.inserted));
+            .map_err(|e| self.insert_status(e))?
+            .finish()
+            .await
+            .map_err(|e| self.insert_status(e))?;
         Ok(pb::InsertAck {
             batch_id: request.batch_id,
             inserted: done.inserted,

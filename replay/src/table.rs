@@ -22,13 +22,14 @@
 //! timeout, and what it mutates.
 
 use std::convert::Infallible;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
 use crossroads_config::{ReplayConfig, WeightNormalization};
 use crossroads_types::batch::{
     BatchError, MAX_OBSERVATION_LEN, ObservationPool, ObservationSpec, RejectReason, Transition,
-    TransitionBatch, ValidBatch, check_priorities,
+    TransitionBatch, check_priorities,
 };
 use crossroads_types::{Columns, ObservationEncoding, PrioritiesUpdated, Sample};
 use parking_lot::Mutex;
@@ -43,6 +44,10 @@ use crossroads_transport::grpc::{RateLimiterInfo, TableInfo};
 use crate::rate_limiter::{RateLimiter, RateLimiterConfig, RatioRamp};
 use crate::storage::{ObservationStore, content_hash};
 use crate::sum_tree::SumTree;
+use crate::table_image::check_image;
+
+pub use crate::prepared_batch::PreparedBatch;
+pub use crate::table_image::TableImage;
 
 /// A table's settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -112,129 +117,42 @@ pub enum TableError {
     Corrupt(u32),
 }
 
-/// A validated batch, encoded into the table's compact format before the
-/// table's lock is taken.
-#[derive(Debug, Clone)]
-pub struct PreparedBatch {
-    spec: ObservationSpec,
-    num_actions: u32,
-    /// The index columns refer to `entries`.
-    columns: Columns,
-    /// Per pool entry: content hash and range in `bytes`.
-    entries: Vec<(u64, usize, usize)>,
-    bytes: Vec<u8>,
+/// A batch admitted to a table but not stored yet ([`Table::reserve`]):
+/// [`store`](Self::store) puts it in, dropping the reservation gives the
+/// room back. Its items count against the rate limiter meanwhile.
+#[derive(Debug)]
+#[must_use = "a reservation holds back inserts until it is stored or dropped"]
+pub struct Reservation {
+    table: Arc<Table>,
+    items: u64,
+    stored: bool,
 }
 
-impl PreparedBatch {
-    /// Encodes a batch (validated where it entered the process, so not
-    /// checked again).
-    pub fn new(batch: ValidBatch) -> Self {
-        let batch = batch.into_inner();
-        let len = batch.spec.num_values().unwrap_or(0);
-        let channels = compact::channels_of(&batch.spec.shape);
-        let pool = &batch.observations;
-        let mut bytes = Vec::new();
-        let mut entries = Vec::with_capacity(pool.len());
-        let (mut pairs, mut scratch) = (Vec::new(), Vec::new());
-        for i in 0..pool.len() {
-            let start = bytes.len();
-            compact::from_wire(
-                pool.encoding(),
-                pool.get(i).unwrap_or_default(),
-                len,
-                channels,
-                &mut pairs,
-                &mut scratch,
-                &mut bytes,
-            );
-            entries.push((content_hash(&bytes[start..]), start, bytes.len()));
-        }
-        Self {
-            spec: batch.spec,
-            num_actions: batch.num_actions,
-            columns: batch.columns,
-            entries,
-            bytes,
-        }
+impl Reservation {
+    /// The table it holds room in.
+    pub fn table(&self) -> &Arc<Table> {
+        &self.table
     }
 
-    /// The batch as a small image whose items take keys `first_key..`
-    /// (what the write-ahead log stores; counters zero).
-    pub fn to_image(&self, first_key: u64) -> TableImage {
-        TableImage {
-            spec: Some((self.spec.clone(), self.num_actions)),
-            next_key: first_key + self.len() as u64,
-            items: self.columns.clone(),
-            observation_offsets: self.entries.iter().map(|(_, s, _)| *s as u64).collect(),
-            observation_data: self.bytes.clone(),
-            ..TableImage::default()
-        }
-    }
-
-    /// The batch an image made by [`to_image`](Self::to_image) holds, and
-    /// its first key; an image that does not hold together, or has no
-    /// spec, is refused.
-    pub fn from_image(image: TableImage) -> Result<(u64, Self), BatchError> {
-        let obs_len = check_image(&image)?;
-        let Some((spec, num_actions)) = image.spec.clone() else {
-            return Err(BatchError::new(
-                RejectReason::BadRequest,
-                "spec",
-                "a batch image must state its observation spec",
-            ));
-        };
-        let n_obs = image.observation_offsets.len();
-        let mut entries = Vec::with_capacity(n_obs);
-        let mut scratch = Vec::new();
-        for i in 0..n_obs {
-            let start = image.observation_offsets[i] as usize;
-            let bad = |problem: String| {
-                BatchError::new(
-                    RejectReason::ObservationEncoding,
-                    format!("observations[{i}]"),
-                    problem,
-                )
-            };
-            let bytes = image
-                .observation(i)
-                .ok_or_else(|| bad("out of the data".to_owned()))?;
-            // Samples decode it later without a check of their own.
-            scratch.clear();
-            compact::to_sparse_wire(bytes, obs_len, &mut scratch)
-                .map_err(|e| bad(e.to_string()))?;
-            entries.push((content_hash(bytes), start, start + bytes.len()));
-        }
-        let first_key = image.next_key - image.len() as u64;
-        Ok((
-            first_key,
-            Self {
-                spec,
-                num_actions,
-                columns: image.items,
-                entries,
-                bytes: image.observation_data,
-            },
-        ))
-    }
-
-    /// Transitions in the batch.
-    pub fn len(&self) -> usize {
-        self.columns.len()
-    }
-
-    /// Whether it has none.
-    pub fn is_empty(&self) -> bool {
-        self.columns.is_empty()
+    /// Stores `batch`, the batch reserved; it cannot be refused anymore
+    /// (its spec and its room were checked when reserved).
+    ///
+    /// - Blocks: no.
+    /// - Timeout: none.
+    /// - Mutates: as [`Table::insert`], without waiting.
+    pub fn store(mut self, batch: &PreparedBatch) -> Inserted {
+        debug_assert_eq!(batch.len() as u64, self.items, "not the batch reserved");
+        let inserted = self.table.store_reserved(self.items, batch);
+        self.stored = true;
+        inserted
     }
 }
 
-impl TryFrom<TransitionBatch> for PreparedBatch {
-    type Error = BatchError;
-
-    /// Validates and encodes a batch made in this process (benchmarks,
-    /// tests, an in-process actor).
-    fn try_from(batch: TransitionBatch) -> Result<Self, BatchError> {
-        ValidBatch::new(batch).map(Self::new)
+impl Drop for Reservation {
+    fn drop(&mut self) {
+        if !self.stored {
+            self.table.release(self.items);
+        }
     }
 }
 
@@ -276,52 +194,6 @@ impl TableStats {
     }
 }
 
-/// A table's whole content in FIFO order, for snapshots.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct TableImage {
-    /// Spec and action count the table holds, if it got a batch.
-    pub spec: Option<(ObservationSpec, u32)>,
-    /// Key the next insert gets; the items hold keys
-    /// `next_key - len .. next_key`.
-    pub next_key: u64,
-    /// Items ever inserted (the rate limiter's count).
-    pub inserts_total: u64,
-    /// Items ever sampled (the rate limiter's count).
-    pub samples_total: u64,
-    /// Priority updates.
-    pub priority_updates_total: u64,
-    /// Ignored priority updates.
-    pub ignored_updates_total: u64,
-    /// The items, oldest first, with their raw priorities; the index
-    /// columns refer to the observations below.
-    pub items: Columns,
-    /// Start of each compact observation in `observation_data`.
-    pub observation_offsets: Vec<u64>,
-    /// Compact observations back to back.
-    pub observation_data: Vec<u8>,
-}
-
-impl TableImage {
-    /// Items in the image.
-    pub fn len(&self) -> usize {
-        self.items.len()
-    }
-
-    /// Whether it holds no item.
-    pub fn is_empty(&self) -> bool {
-        self.items.is_empty()
-    }
-
-    fn observation(&self, i: usize) -> Option<&[u8]> {
-        let start = *self.observation_offsets.get(i)? as usize;
-        let end = self
-            .observation_offsets
-            .get(i + 1)
-            .map_or(self.observation_data.len(), |e| *e as usize);
-        self.observation_data.get(start..end)
-    }
-}
-
 #[derive(Debug)]
 struct Inner {
     spec: Option<(ObservationSpec, u32)>,
@@ -336,16 +208,22 @@ struct Inner {
     rng: Xoshiro256PlusPlus,
     /// Also the count of items ever inserted and sampled.
     limiter: RateLimiter,
+    /// Items reserved and not stored yet; they count against the limiter.
+    reserved: u64,
+    /// Whether `spec` was set by a reservation and no batch is stored
+    /// yet: dropping the last reservation then clears it again.
+    spec_reserved: bool,
     priority_updates_total: u64,
     ignored_updates_total: u64,
 }
 /// One prioritized table. Thread-safe (`&self` everywhere); share it in an
 /// `Arc`.
 ///
-/// Every method but [`insert`](Self::insert) and [`sample`](Self::sample)
-/// returns without waiting; those two wait for the rate limiter with no
-/// lock held, at most their timeout. Each method's doc states what it
-/// mutates; the accessors ([`name`](Self::name), [`config`](Self::config),
+/// Every method but [`insert`](Self::insert), [`reserve`](Self::reserve)
+/// and [`sample`](Self::sample) returns without waiting; those wait for
+/// the rate limiter with no lock held, at most their timeout. Each
+/// method's doc states what it mutates; the accessors
+/// ([`name`](Self::name), [`config`](Self::config),
 /// [`metrics`](Self::metrics)) take no lock and mutate nothing. A change
 /// of content wakes every waiting call to look again.
 #[derive(Debug)]
@@ -405,12 +283,93 @@ impl Table {
     ) -> Result<Inserted, TableError> {
         self.wait_for("insert", timeout, shutdown, |inner, config| {
             inner.check_spec(batch)?;
-            if !inner.limiter.can_insert() {
+            if !inner.limiter.can_insert_after(inner.reserved) {
                 return Ok(None);
             }
             Ok(Some(inner.insert(config, batch)))
         })
         .await
+    }
+
+    /// Admits a batch without storing it: the wait and checks of
+    /// [`insert`](Self::insert), after which the batch can only be stored
+    /// ([`Reservation::store`]) or given up (the reservation dropped). The
+    /// server reserves before it writes a batch to the write-ahead log and
+    /// stores it once the record is durable: a batch it does not
+    /// acknowledge is never sampled, and a durable one is never refused.
+    ///
+    /// - Blocks: as [`insert`](Self::insert); items reserved and not yet
+    ///   stored count against the rate limiter as if inserted.
+    /// - Timeout: as [`insert`](Self::insert).
+    /// - Mutates: the reserved count, and the spec when the table has none
+    ///   (cleared again if every reservation is dropped before a batch is
+    ///   stored); items, counters and gauges change when it is stored.
+    pub async fn reserve(
+        self: &Arc<Self>,
+        batch: &PreparedBatch,
+        timeout: Duration,
+        shutdown: &Shutdown,
+    ) -> Result<Reservation, TableError> {
+        self.wait_for("insert", timeout, shutdown, |inner, _| {
+            inner.check_spec(batch)?;
+            if !inner.limiter.can_insert_after(inner.reserved) {
+                return Ok(None);
+            }
+            inner.reserve(batch);
+            Ok(Some(()))
+        })
+        .await?;
+        Ok(self.reservation(batch))
+    }
+
+    /// Admits a batch at once, whatever the rate limiter says (for the
+    /// last batches drained at shutdown).
+    ///
+    /// - Blocks: no.
+    /// - Timeout: none.
+    /// - Mutates: as [`reserve`](Self::reserve), without waiting.
+    pub fn reserve_now(self: &Arc<Self>, batch: &PreparedBatch) -> Result<Reservation, TableError> {
+        {
+            let mut inner = self.inner.lock();
+            inner.check_spec(batch)?;
+            inner.reserve(batch);
+        }
+        Ok(self.reservation(batch))
+    }
+
+    fn reservation(self: &Arc<Self>, batch: &PreparedBatch) -> Reservation {
+        Reservation {
+            table: self.clone(),
+            items: batch.len() as u64,
+            stored: false,
+        }
+    }
+
+    /// Stores a reserved batch ([`Reservation::store`]).
+    fn store_reserved(&self, items: u64, batch: &PreparedBatch) -> Inserted {
+        let inserted = {
+            let mut inner = self.inner.lock();
+            inner.reserved = inner.reserved.saturating_sub(items);
+            inner.insert(&self.config, batch)
+        };
+        self.after_change();
+        inserted
+    }
+
+    /// Gives back the room of a reservation dropped unstored; wakes waiting
+    /// inserts.
+    fn release(&self, items: u64) {
+        self.inner.lock().release(items);
+        self.after_change();
+    }
+
+    /// Key the next stored item gets.
+    ///
+    /// - Blocks: no.
+    /// - Timeout: none.
+    /// - Mutates: nothing.
+    pub fn next_key(&self) -> u64 {
+        self.inner.lock().next_key
     }
 
     /// Inserts a batch at once, whatever the rate limiter says (for the
@@ -542,7 +501,7 @@ impl Table {
                 samples_per_insert: inner.limiter.current_ratio(),
                 error_tolerance: limiter.tolerance,
                 can_sample: inner.limiter.can_sample() && inner.size > 0,
-                can_insert: inner.limiter.can_insert(),
+                can_insert: inner.limiter.can_insert_after(inner.reserved),
                 sample_waits_total: sample_waits,
                 insert_waits_total: insert_waits,
             },
@@ -720,83 +679,6 @@ impl Table {
 /// The largest next key a restored image may hold.
 const MAX_RESTORED_KEY: u64 = 1 << 63;
 
-/// Checks what a snapshot's image says of its items, as
-/// [`TransitionBatch::validate`] checks a batch's: returns the length of
-/// an observation (each is checked as it is stored).
-fn check_image(image: &TableImage) -> Result<usize, BatchError> {
-    let c = &image.items;
-    let n = c.len();
-    if c.check_lengths().is_err() || image.next_key < n as u64 {
-        return Err(BatchError::new(
-            RejectReason::LengthMismatch,
-            "items",
-            "columns of different lengths",
-        ));
-    }
-    let Some((spec, num_actions)) = &image.spec else {
-        if n == 0 {
-            return Ok(0);
-        }
-        return Err(BatchError::new(
-            RejectReason::Spec,
-            "spec",
-            format!("{n} items without a spec"),
-        ));
-    };
-    let obs_len = spec
-        .num_values()
-        .filter(|_| !spec.kind.is_empty() && *num_actions > 0)
-        .ok_or_else(|| {
-            BatchError::new(
-                RejectReason::Spec,
-                "spec",
-                format!("{spec} with {num_actions} actions is not a valid spec"),
-            )
-        })?;
-    // One transition at a time, through the batch check.
-    let mut one = TransitionBatch::new(spec.clone(), *num_actions, ObservationEncoding::SparseF32);
-    one.push_observation(&[]);
-    one.push(Transition {
-        observation: 0,
-        action: 0,
-        reward: 0.0,
-        discount: 0.0,
-        priority: 0.0,
-        next_observation: 0,
-    });
-    for i in 0..n {
-        let Some(t) = c.get(i) else { break };
-        one.columns.set(
-            0,
-            Transition {
-                observation: 0,
-                next_observation: 0,
-                ..t
-            },
-        );
-        one.validate().map_err(|e| {
-            let field = e.field.replacen("[0]", &format!("[{i}]"), 1);
-            BatchError::new(e.reason, format!("items.{field}"), e.problem)
-        })?;
-    }
-    let n_obs = image.observation_offsets.len();
-    for (i, (o, no)) in c
-        .observation_index
-        .iter()
-        .zip(&c.next_observation_index)
-        .enumerate()
-    {
-        if *o as usize >= n_obs || *no as usize >= n_obs {
-            return Err(BatchError::new(
-                RejectReason::IndexRange,
-                format!("items[{i}].observation"),
-                format!("refers to observation {} of {n_obs}", (*o).max(*no)),
-            ));
-        }
-    }
-    Ok(obs_len)
-}
-
 /// What a sample copied out under the lock; finished into a [`Sample`]
 /// without it.
 struct RawSample {
@@ -875,6 +757,8 @@ impl Inner {
             size: 0,
             rng: Xoshiro256PlusPlus::seed_from_u64(config.seed),
             limiter: RateLimiter::new(config.limiter),
+            reserved: 0,
+            spec_reserved: false,
             priority_updates_total: 0,
             ignored_updates_total: 0,
         }
@@ -938,10 +822,29 @@ impl Inner {
         self.next_key += 1;
     }
 
+    /// Takes room for `batch` (its spec checked by the caller).
+    fn reserve(&mut self, batch: &PreparedBatch) {
+        if self.spec.is_none() {
+            self.spec = Some((batch.spec.clone(), batch.num_actions));
+            self.spec_reserved = true;
+        }
+        self.reserved = self.reserved.saturating_add(batch.len() as u64);
+    }
+
+    /// Gives back the room of `items` reserved and not stored.
+    fn release(&mut self, items: u64) {
+        self.reserved = self.reserved.saturating_sub(items);
+        if self.reserved == 0 && self.spec_reserved {
+            self.spec = None;
+            self.spec_reserved = false;
+        }
+    }
+
     fn insert(&mut self, config: &TableConfig, batch: &PreparedBatch) -> Inserted {
         if self.spec.is_none() {
             self.spec = Some((batch.spec.clone(), batch.num_actions));
         }
+        self.spec_reserved = false;
         let first_key = self.next_key;
         let mut ids = Interned::new(batch.entries.len());
         for i in 0..batch.len() {

@@ -1,12 +1,26 @@
 //! The write-ahead log: an acknowledged insert survives a kill -9.
 //!
 //! With the log on, an insert is acknowledged only once its batch is in
-//! the log and fsynced. Inserts go into the table first (which gives them
-//! their keys), then to the log as one record each: the batch as a small
-//! [`TableImage`] whose keys say where it sits. One writer thread appends
-//! and fsyncs records in groups (group commit): whatever arrived while the
-//! last fsync ran, or up to `sync_interval` / `sync_bytes` more, shares one
-//! fsync, and every insert of the group is answered when it returns.
+//! the log and fsynced, and it enters the table only then: a batch whose
+//! record fails is neither sampled nor kept, so the actor's resend stores
+//! it once. The insert reserves its room in the table first (the rate
+//! limiter's wait and the spec check, [`Table::reserve`]) and hands the
+//! reservation to the log. One writer thread appends and fsyncs records in
+//! groups (group commit): whatever arrived while the last fsync ran, or up
+//! to `sync_interval` / `sync_bytes` more, shares one fsync; once it
+//! returns the writer stores the group's batches in their tables, in log
+//! order, and answers every insert of the group.
+//!
+//! A record is the batch as a small [`TableImage`] whose keys say where it
+//! sits. The writer gives the keys as it frames the record: its table's
+//! next key, after the group's earlier records. The writer is the only one
+//! storing batches while the log is on and stores each group in the order
+//! it wrote it, so the keys in the log are the keys in the table, and the
+//! replay at start, which inserts the records a snapshot lacks in key
+//! order, gives them the same keys again. A failed group is stored nowhere
+//! and takes no keys: the next group's records take them, and the log has
+//! no gap. (Keys handed out before the write would leave a gap in the
+//! table's ring wherever a write failed.)
 //!
 //! The log is a folder of segments `wal-<seq>.log` beside the snapshots.
 //! A snapshot seals the current segment before it copies the tables
@@ -43,7 +57,7 @@ use parking_lot::Mutex;
 
 use crate::metrics::ReplayMetrics;
 use crate::snapshot::{self, Reader};
-use crate::table::{PreparedBatch, Table, TableImage};
+use crate::table::{Inserted, PreparedBatch, Reservation, Table, TableImage};
 
 /// First bytes of every segment.
 pub const MAGIC: &[u8; 8] = b"CRRPLWAL";
@@ -339,45 +353,49 @@ pub fn set_aside(dir: &Path) -> Result<usize, WalError> {
     Ok(found.len())
 }
 
-type Reply = tokio::sync::oneshot::Sender<Result<(), WalError>>;
+type Reply = tokio::sync::oneshot::Sender<Result<Inserted, WalError>>;
+
+/// A batch on its way to the log, with its room in its table.
+struct Record {
+    reservation: Reservation,
+    batch: PreparedBatch,
+    reply: Reply,
+}
 
 enum Msg {
-    /// A framed record, answered once durable (or failed).
-    Record(Vec<u8>, Reply),
+    /// A batch to frame and write; stored and answered once durable, or
+    /// answered with the failure (its reservation dropped). Boxed: a
+    /// record is some 280 bytes, a rotation a channel.
+    Record(Box<Record>),
     /// Seal the current segment; answers the last sealed sequence number.
     Rotate(mpsc::Sender<u64>),
 }
 
-/// A record on its way to disk: wait on it (async) or block on it.
+/// A batch on its way to disk and then into its table: wait on it (async)
+/// or block on it.
 #[derive(Debug)]
-pub struct Pending(tokio::sync::oneshot::Receiver<Result<(), WalError>>);
+pub struct Pending(tokio::sync::oneshot::Receiver<Result<Inserted, WalError>>);
 
 impl Pending {
-    /// Waits until the record is durable, or its write failed.
-    pub async fn durable(self) -> Result<(), WalError> {
+    /// Waits until the record is durable and the batch stored, or the
+    /// write failed (nothing stored).
+    pub async fn durable(self) -> Result<Inserted, WalError> {
         self.0.await.unwrap_or(Err(WalError::Stopped))
     }
 
     /// The same, blocking the thread (not on an async runtime's thread).
-    pub fn wait_durable(self) -> Result<(), WalError> {
+    pub fn wait_durable(self) -> Result<Inserted, WalError> {
         self.0.blocking_recv().unwrap_or(Err(WalError::Stopped))
     }
 
     /// The answer if it has come, without waiting.
-    pub fn try_durable(&mut self) -> Option<Result<(), WalError>> {
+    pub fn try_durable(&mut self) -> Option<Result<Inserted, WalError>> {
         use tokio::sync::oneshot::error::TryRecvError;
         match self.0.try_recv() {
             Ok(result) => Some(result),
             Err(TryRecvError::Empty) => None,
             Err(TryRecvError::Closed) => Some(Err(WalError::Stopped)),
         }
-    }
-
-    /// An answer already given: durable.
-    pub fn done() -> Self {
-        let (tx, rx) = tokio::sync::oneshot::channel();
-        let _ = tx.send(Ok(()));
-        Self(rx)
     }
 }
 
@@ -437,16 +455,21 @@ impl Wal {
         }
     }
 
-    /// Queues `batch`, whose items took keys `first_key..`, in table
-    /// `table`; wait on the answer before acknowledging the insert.
-    pub fn append(&self, table: &str, batch: &PreparedBatch, first_key: u64) -> Pending {
-        let mut record = Vec::new();
-        encode_record(&mut record, table, &batch.to_image(first_key));
-        let (tx, rx) = tokio::sync::oneshot::channel();
+    /// Queues `batch`, which `reservation` holds room for, to be logged
+    /// and then stored in the reservation's table; wait on the answer
+    /// before acknowledging the insert. The batch is stored only if its
+    /// record is durable; otherwise the reservation is dropped.
+    pub fn append(&self, reservation: Reservation, batch: PreparedBatch) -> Pending {
+        let (reply, rx) = tokio::sync::oneshot::channel();
+        let record = Record {
+            reservation,
+            batch,
+            reply,
+        };
         if let Some(sender) = &*self.sender.lock() {
-            // A send fails only when the writer is gone; the dropped reply
-            // then answers `Stopped`.
-            let _ = sender.send(Msg::Record(record, tx));
+            // A send fails only when the writer is gone; the dropped record
+            // then gives its room back and its reply answers `Stopped`.
+            let _ = sender.send(Msg::Record(Box::new(record)));
         }
         Pending(rx)
     }
@@ -510,24 +533,84 @@ struct Writer {
     metrics: ReplayMetrics,
 }
 
+/// The records of one group: their bytes, framed, and what the writer
+/// stores and answers once they are durable.
+#[derive(Default)]
+struct Group {
+    bytes: Vec<u8>,
+    records: Vec<(Record, u64)>,
+    /// Per table, the key the group's next record of it takes.
+    next_keys: BTreeMap<String, u64>,
+}
+
+impl Group {
+    /// Frames a record into the group, or returns a rotation's reply.
+    fn take(&mut self, msg: Msg) -> Option<mpsc::Sender<u64>> {
+        let record = match msg {
+            Msg::Record(record) => *record,
+            Msg::Rotate(reply) => return Some(reply),
+        };
+        let table = record.reservation.table();
+        let next = self
+            .next_keys
+            .entry(table.name().to_owned())
+            .or_insert_with(|| table.next_key());
+        let first_key = *next;
+        *next += record.batch.len() as u64;
+        encode_record(
+            &mut self.bytes,
+            table.name(),
+            &record.batch.to_image(first_key),
+        );
+        self.records.push((record, first_key));
+        None
+    }
+
+    /// Stores every batch of the group in its table, in log order, if the
+    /// group is durable, and answers each insert; empties the group.
+    fn finish(&mut self, written: &Result<(), WalError>) {
+        for (record, first_key) in self.records.drain(..) {
+            let Record {
+                reservation,
+                batch,
+                reply,
+            } = record;
+            let answer = match written {
+                Ok(()) => {
+                    let table = reservation.table().clone();
+                    let stored = reservation.store(&batch);
+                    if stored.first_key != first_key {
+                        tracing::error!(
+                            table = table.name(),
+                            logged = first_key,
+                            stored = stored.first_key,
+                            "a batch was stored at other keys than its log record says: \
+                             something inserted into the table beside the log's writer"
+                        );
+                    }
+                    Ok(stored)
+                }
+                Err(e) => {
+                    drop(reservation);
+                    Err(e.clone())
+                }
+            };
+            let _ = reply.send(answer);
+        }
+        self.bytes.clear();
+        self.next_keys.clear();
+    }
+}
+
 impl Writer {
     fn run(&mut self, rx: &mpsc::Receiver<Msg>) {
-        let mut bytes = Vec::new();
-        let mut replies = Vec::new();
-        let take = |msg: Msg, bytes: &mut Vec<u8>, replies: &mut Vec<Reply>| match msg {
-            Msg::Record(record, reply) => {
-                bytes.extend_from_slice(&record);
-                replies.push(reply);
-                None
-            }
-            Msg::Rotate(reply) => Some(reply),
-        };
+        let mut group = Group::default();
         while let Ok(first) = rx.recv() {
-            let mut rotate = take(first, &mut bytes, &mut replies);
+            let mut rotate = group.take(first);
             // Whatever is already queued shares this fsync; then wait up to
             // the interval for more, unless the group is full.
             let deadline = Instant::now() + self.sync_interval;
-            while rotate.is_none() && bytes.len() < self.sync_bytes {
+            while rotate.is_none() && group.bytes.len() < self.sync_bytes {
                 let next = match rx.try_recv() {
                     Ok(m) => Some(m),
                     Err(mpsc::TryRecvError::Disconnected) => None,
@@ -541,14 +624,13 @@ impl Writer {
                     }
                 };
                 let Some(msg) = next else { break };
-                rotate = take(msg, &mut bytes, &mut replies);
+                rotate = group.take(msg);
             }
-            if !replies.is_empty() {
-                let result = self.write_group(&bytes, replies.len());
-                for reply in replies.drain(..) {
-                    let _ = reply.send(result.clone());
-                }
-                bytes.clear();
+            if !group.records.is_empty() {
+                let written = self.write_group(&group.bytes, group.records.len());
+                // Stored before a rotation is answered: every record of a
+                // sealed segment is in its table when a snapshot copies it.
+                group.finish(&written);
             }
             if let Some(reply) = rotate {
                 let sealed = match self.current.take() {

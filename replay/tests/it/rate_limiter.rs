@@ -141,6 +141,33 @@ async fn inserts_wait_for_samples_under_a_ratio() {
 }
 
 #[tokio::test]
+async fn items_reserved_and_not_yet_stored_hold_back_inserts_until_given_up() {
+    // Two samples per insert within 2 samples either way, from 4 items:
+    // once 4 are in, at most 5 without a sample.
+    let t = limited(4, 2.0, 2.0);
+    let shutdown = Shutdown::new();
+    let five = prepared(0, 5, None);
+    let reserved = t
+        .reserve(&five, WAIT, &shutdown)
+        .await
+        .expect("below the minimum size");
+    // Five items on their way to the log count as inserted: a sixth waits.
+    let waited = t
+        .insert(&prepared(5, 1, None), Duration::from_millis(50), &shutdown)
+        .await;
+    assert!(
+        matches!(waited, Err(TableError::Timeout { .. })),
+        "{waited:?}"
+    );
+    // Given up (their log write failed), they hold nothing back.
+    drop(reserved);
+    t.insert(&prepared(5, 1, None), Duration::from_secs(1), &shutdown)
+        .await
+        .expect("room again");
+    assert_eq!(t.stats().info.inserts_total, 1);
+}
+
+#[tokio::test]
 async fn a_caller_that_goes_away_mid_wait_leaves_the_table_usable() {
     let t = limited(2, 0.0, 0.0);
     let shutdown = Shutdown::new();

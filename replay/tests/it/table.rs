@@ -250,6 +250,40 @@ async fn a_batch_of_another_spec_is_rejected_and_changes_nothing() {
     assert_eq!(t.image(), before);
 }
 
+#[tokio::test]
+async fn a_reserved_batch_is_sampled_only_once_stored_and_a_dropped_reservation_leaves_nothing() {
+    let t = Arc::new(table(10, 1.0));
+    let before = t.image();
+    let first = prepared(0, 3, None);
+    let reservation = t.reserve_now(&first).expect("room");
+    // Reserved, not stored (its log record on the way): nothing to sample.
+    let none = t
+        .sample(1, 0.0, Duration::from_millis(20), &Shutdown::new())
+        .await;
+    assert!(
+        matches!(none, Err(TableError::Timeout { .. })),
+        "{:?}",
+        none.as_ref().err()
+    );
+    assert_eq!(t.stats().info.size, 0);
+    // Its spec is the table's meanwhile: a batch of another is refused.
+    let mut other = util::batch(0, 2, None);
+    other.spec.kind = "sequential".to_owned();
+    let other = PreparedBatch::new(ValidBatch::new(other).expect("valid alone"));
+    assert!(matches!(t.reserve_now(&other), Err(TableError::Invalid(_))));
+    // Dropped unstored (its record failed): the table is as it was, spec
+    // included, so the other spec goes in now.
+    drop(reservation);
+    assert_eq!(t.image(), before);
+    let stored = t
+        .reserve_now(&other)
+        .expect("the spec is free again")
+        .store(&other);
+    assert_eq!((stored.first_key, stored.inserted, stored.size), (0, 2, 2));
+    let s = sample(&t, 2, 0.0).await;
+    assert_eq!(s.keys.len(), 2);
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn actors_insert_while_the_learner_samples_and_updates() {
     let t = Arc::new(table(500, 0.6));

@@ -12,7 +12,7 @@ use crossroads_replay::wal::{self, Wal, WalConfig};
 use crossroads_replay::{ReplayMetrics, RunningServer, TableImage};
 use crossroads_transport::grpc::ReplayClient;
 
-use crate::util::{batch, prepared, server_config};
+use crate::util::{WAIT, batch, prepared, server_config};
 
 async fn serve(config: &Config) -> (RunningServer, Shutdown) {
     let shutdown = Shutdown::new();
@@ -125,9 +125,10 @@ fn records_round_trip_and_a_torn_tail_keeps_every_whole_record_before_it() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn concurrent_appends_share_fsyncs_and_all_become_durable() {
+async fn concurrent_appends_share_fsyncs_and_are_stored_at_the_keys_they_are_logged_at() {
     let dir = tempfile::tempdir().expect("temp dir");
     let metrics = ReplayMetrics::unregistered();
+    let table = std::sync::Arc::new(crate::util::table(1000, 0.0));
     let log = std::sync::Arc::new(
         Wal::open(
             WalConfig {
@@ -141,17 +142,18 @@ async fn concurrent_appends_share_fsyncs_and_all_become_durable() {
     );
     let mut tasks = Vec::new();
     for b in 0..64u32 {
-        let log = log.clone();
+        let (log, table) = (log.clone(), table.clone());
         tasks.push(tokio::spawn(async move {
-            log.append("t", &prepared(b * 10, 10, None), u64::from(b) * 10)
-                .durable()
-                .await
+            let batch = prepared(b * 10, 10, None);
+            let reservation = table.reserve_now(&batch).expect("room");
+            log.append(reservation, batch).durable().await
         }));
     }
     for t in tasks {
         t.await.expect("task").expect("durable");
     }
     assert_eq!(metrics.wal_records.get(), 64);
+    assert_eq!(table.stats().info.size, 640, "each stored once durable");
     let groups = metrics.wal_sync_seconds.get_sample_count();
     assert!(
         (1..64).contains(&groups),
@@ -165,6 +167,22 @@ async fn concurrent_appends_share_fsyncs_and_all_become_durable() {
     let bytes = std::fs::read(dir.path().join("wal").join(&segments[0])).expect("read");
     let d = wal::decode_segment(&bytes).expect("valid");
     assert_eq!((d.records.len(), d.torn), (64, None));
+    // The log's keys are the table's: one after another in log order, and
+    // each record's batch is the one the table holds at those keys.
+    let held = table.image();
+    let mut next = 0;
+    for (_, image) in &d.records {
+        let (first_key, batch) =
+            crossroads_replay::PreparedBatch::from_image(image.clone()).expect("holds together");
+        assert_eq!(first_key, next);
+        let at = first_key as usize;
+        assert_eq!(
+            held.items.rewards[at..at + batch.len()],
+            image.items.rewards[..],
+            "the batch at keys {first_key}.."
+        );
+        next += batch.len() as u64;
+    }
 }
 
 #[tokio::test]
@@ -243,6 +261,89 @@ async fn a_segment_left_from_before_a_snapshot_doubles_nothing() {
     let after = server.table("t").expect("table").image();
     assert_eq!(tags(&after), tags(&before));
     assert_eq!(after.len(), 40);
+    stop(server, shutdown).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_batch_whose_log_write_fails_is_never_sampled_and_its_resend_is_stored_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let live = dir.path().join("live");
+    let (server, shutdown) = serve(&server_config(Some(&live))).await;
+    let c = client(&server);
+    let table = server.table("t").expect("table");
+    // The segment the log's writer creates first is taken (by a folder):
+    // the batch's write fails as on a full disk, even for root.
+    let blocker = live.join("wal").join("wal-0000000001.log");
+    std::fs::create_dir(&blocker).expect("take the first segment's name");
+    // A learner samples all along, until the batch is sent again.
+    let enough = Shutdown::new();
+    let sampler = tokio::spawn({
+        let (table, enough) = (table.clone(), enough.clone());
+        async move {
+            let mut keys = Vec::new();
+            while !enough.is_triggered() {
+                if let Ok(s) = table
+                    .sample(1, 0.0, Duration::from_millis(5), &enough)
+                    .await
+                {
+                    keys.extend(s.keys);
+                }
+            }
+            keys
+        }
+    });
+    let refused = c
+        .insert(batch(0, 10, None))
+        .await
+        .expect_err("its log write fails");
+    assert_eq!(refused.code(), Some(tonic::Code::Unavailable), "{refused}");
+    assert!(refused.to_string().contains("nothing stored"), "{refused}");
+    assert_eq!(table.stats().info.size, 0, "not in the table");
+    // Room again: the actor sends the batch again until it is stored.
+    std::fs::remove_dir(&blocker).expect("give the name back");
+    enough.trigger();
+    let sampled = sampler.await.expect("sampler");
+    assert!(
+        sampled.is_empty(),
+        "sampled while unacknowledged: {sampled:?}"
+    );
+    let deadline = tokio::time::Instant::now() + WAIT;
+    let ack = loop {
+        match c.insert(batch(0, 10, None)).await {
+            Ok(ack) => break ack,
+            // Refused for a second after the failure, nothing stored.
+            Err(e) => {
+                assert!(e.to_string().contains("nothing stored"), "{e}");
+                assert!(tokio::time::Instant::now() < deadline, "never stored: {e}");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    };
+    assert_eq!((ack.inserted, ack.table_size), (10, 10));
+    let held = table.image();
+    assert_eq!(held.len(), 10, "one batch's items, once");
+    assert_eq!(
+        tags(&held),
+        (0..10).map(|t| (t, 1)).collect::<BTreeMap<u32, usize>>()
+    );
+    // The log holds it once, at the keys the table gave it, so a crash
+    // now restores it once.
+    let segments = segment_names(&live);
+    assert_eq!(segments, ["wal-0000000001.log"]);
+    let bytes = std::fs::read(live.join("wal").join(&segments[0])).expect("read");
+    let logged = wal::decode_segment(&bytes).expect("valid").records;
+    assert_eq!(logged.len(), 1);
+    assert_eq!(
+        (logged[0].1.next_key, logged[0].1.len()),
+        (held.next_key, 10)
+    );
+    let crashed = dir.path().join("crashed");
+    crash_copy(&live, &crashed);
+    stop(server, shutdown).await;
+    let (server, shutdown) = serve(&server_config(Some(&crashed))).await;
+    let after = server.table("t").expect("table").image();
+    assert_eq!(tags(&after), tags(&held));
+    assert_eq!(after.next_key, held.next_key);
     stop(server, shutdown).await;
 }
 
