@@ -32,11 +32,11 @@ run: build
 deploydeps:
 	@scripts/setup-deploy.sh
 
-# Every test: the slow trainings too (CROSSROADS_SLOW_TESTS=1), and those
-# that need Python, Docker, SUMO or (as root) a tmpfs mount and network
-# namespaces (ignored by plain `cargo test`), which fail here when their
-# tool is missing (CROSSROADS_REQUIRE_*=1); then each fuzz target
-# FUZZ_SMOKE_SECONDS over its corpus.
+# Every test: the slow trainings (CROSSROADS_SLOW_TESTS=1) and those that
+# need Python, Docker, SUMO or (as root) a tmpfs mount and network
+# namespaces, all ignored by plain `cargo test` with the reason, and here
+# failing when their tool is missing (CROSSROADS_REQUIRE_*=1); then each
+# fuzz target FUZZ_SMOKE_SECONDS over its corpus.
 FUZZ_SMOKE_SECONDS ?= 20
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check

@@ -1,15 +1,15 @@
 //! The `crossroads` binary as a user runs it.
 
-use std::process::{Command, Output};
+use std::process::Output;
 
 use clap::CommandFactory;
 use crossroads::cli::Cli;
 
+/// `crossroads args` at the binary's default log level.
 fn crossroads(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    crate::crossroads()
+        .command()
         .args(args)
-        .env_remove("CROSSROADS_CONFIG")
-        .env_remove("CROSSROADS_EXPERIMENT")
         .env_remove("RUST_LOG")
         .output()
         .expect("run crossroads")
@@ -79,7 +79,8 @@ fn config_show_prints_toml_with_layers_applied() {
         "[runtime]\nworker_threads = 5\ncompute_threads = 1\n",
     )
     .expect("write");
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let out = crate::crossroads()
+        .command()
         .args(["--config", file.to_str().expect("utf-8 path")])
         .args(["--set", "runtime.compute_threads=3", "config", "show"])
         .args(["--set", "actor.envs=12"])
@@ -133,9 +134,9 @@ fn a_built_in_experiment_is_the_base_of_any_role() {
         "--set wins"
     );
 
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let out = crate::crossroads()
+        .command()
         .args(["config", "show"])
-        .env_remove("CROSSROADS_CONFIG")
         .env("CROSSROADS_EXPERIMENT", "ttg-nowhere")
         .output()
         .expect("run");
@@ -164,7 +165,8 @@ fn bad_config_fails_with_an_error_naming_the_key() {
     assert!(err.contains("runtime.worker_threads"), "{err}");
     assert!(err.contains("bad.toml"), "{err}");
 
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let out = crate::crossroads()
+        .command()
         .args(["config", "check"])
         .env("CROSSROADS_RUNTIME__WORKER_THREADS", "lots")
         .output()
@@ -242,12 +244,10 @@ fn doctor_times_the_network_a_run_would_train() {
 /// `crossroads doctor --json` of a small network, with each variable of
 /// `vars` set or (None) removed, and the report.
 fn doctor_with(vars: &[(&str, Option<&str>)], extra: &[&str]) -> serde_json::Value {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_crossroads"));
+    let mut c = crate::crossroads().command();
     c.args(["--set", "learner.trunk=mlp", "--set", "learner.hidden=[32]"])
         .args(["doctor", "--json"])
-        .args(extra)
-        .env_remove("CROSSROADS_CONFIG")
-        .env_remove("CROSSROADS_EXPERIMENT");
+        .args(extra);
     for (var, value) in vars {
         match value {
             Some(v) => c.env(var, v),

@@ -20,13 +20,10 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use crossroads::commands::train::sum_metric;
+use crossroads_test_support::gates::{self, Need};
 
 fn repo() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn required() -> bool {
-    std::env::var("CROSSROADS_REQUIRE_DOCKER").is_ok_and(|v| v == "1")
 }
 
 /// Whether `program args` runs and exits 0; when it does not, fails the
@@ -39,12 +36,13 @@ fn have(program: &str, args: &[&str]) -> bool {
         .status()
         .is_ok_and(|s| s.success());
     if !ok {
-        assert!(
-            !required(),
-            "`{program} {}` failed; scripts/setup-deploy.sh installs the deploy tools",
-            args.join(" ")
+        gates::skip_unless_required(
+            Need::Docker,
+            &format!(
+                "`{program} {}` is not available; scripts/setup-deploy.sh installs the deploy tools",
+                args.join(" ")
+            ),
         );
-        eprintln!("skipped: `{program} {}` is not available", args.join(" "));
     }
     ok
 }
@@ -70,13 +68,6 @@ fn free_port() -> u16 {
         .and_then(|l| l.local_addr())
         .expect("a free port")
         .port()
-}
-
-fn crossroads() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_crossroads"));
-    c.env_remove("CROSSROADS_CONFIG")
-        .env_remove("CROSSROADS_EXPERIMENT");
-    c
 }
 
 // ---------------------------------------------------------------------------
@@ -225,13 +216,14 @@ fn kubernetes_manifests_render_with_kustomize_and_match_the_schemas() {
     if !have("kubectl", &["version", "--client"]) {
         return;
     }
-    assert!(
-        validator().exists() || !required(),
-        "{} is missing; scripts/setup-python.sh installs it",
-        validator().display()
-    );
     if !validator().exists() {
-        eprintln!("skipped: no kubernetes-validate");
+        gates::skip_unless_required(
+            Need::Docker,
+            &format!(
+                "{} is missing; scripts/setup-python.sh installs it",
+                validator().display()
+            ),
+        );
         return;
     }
     let k8s = repo().join("deploy/k8s");
@@ -274,12 +266,11 @@ fn kubernetes_manifests_render_with_kustomize_and_match_the_schemas() {
         .expect("the actor Deployment's replicas")
         .to_owned();
     let config = repo().join("deploy/k8s/config.toml");
-    let shown = text(&run(crossroads().arg("--config").arg(&config).args([
-        "--experiment",
-        "ttg-left",
-        "config",
-        "show",
-    ])));
+    let shown = text(&run(crate::crossroads()
+        .command()
+        .arg("--config")
+        .arg(&config)
+        .args(["--experiment", "ttg-left", "config", "show"])));
     let shown: toml::Value = toml::from_str(&shown).expect("TOML");
     assert_eq!(
         shown["actor"]["count"].as_integer().map(|n| n.to_string()),
@@ -527,11 +518,10 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
         return;
     }
     let Some(program) = compose_program() else {
-        assert!(
-            !required(),
-            "neither `docker compose` nor `docker-compose` works"
+        gates::skip_unless_required(
+            Need::Docker,
+            "neither `docker compose` nor `docker-compose` works",
         );
-        eprintln!("skipped: no docker compose");
         return;
     };
     // promtool accepts the shipped Prometheus config as it is.
@@ -543,7 +533,7 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     let tag = format!("crossroads:test-{}", std::process::id());
     run(Command::new(repo().join("deploy/build-image.sh"))
         .arg(&tag)
-        .env("CROSSROADS_BIN", env!("CARGO_BIN_EXE_crossroads")));
+        .env("CROSSROADS_BIN", crate::crossroads().bin()));
     let _image = RemoveImage(tag.clone());
 
     // Every role in the image runs with the load-time settings the binary
@@ -556,7 +546,8 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     let inside = json(run(
         Command::new("docker").args(["run", "--rm", &tag, "doctor", "--json"])
     ));
-    let host = json(run(crossroads()
+    let host = json(run(crate::crossroads()
+        .command()
         .args(["doctor", "--json"])
         .env_remove("OMP_WAIT_POLICY")
         .env_remove("GLIBC_TUNABLES")));
@@ -663,7 +654,7 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
 
     // A checkpoint through the gRPC API from outside the containers.
     let learner_url = format!("http://127.0.0.1:{learner_port}");
-    let saved = text(&run(crossroads().args([
+    let saved = text(&run(crate::crossroads().command().args([
         "checkpoints",
         "--learner",
         &learner_url,
@@ -672,7 +663,7 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     ])));
     let saved: serde_json::Value = serde_json::from_str(&saved).expect("save prints JSON");
     let id = saved["id"].as_str().expect("checkpoint id").to_owned();
-    let listed = text(&run(crossroads().args([
+    let listed = text(&run(crate::crossroads().command().args([
         "checkpoints",
         "--learner",
         &learner_url,
@@ -683,7 +674,8 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
         "list names the saved checkpoint {id}: {listed}"
     );
     let pulled_dir = dir.path().join("pulled");
-    let pulled = text(&run(crossroads()
+    let pulled = text(&run(crate::crossroads()
+        .command()
         .args([
             "checkpoints",
             "--learner",
@@ -698,7 +690,8 @@ fn compose_trains_through_real_containers_and_prometheus_scrapes_them() {
     let folder = PathBuf::from(pulled["path"].as_str().expect("path"));
     let files = std::fs::read_dir(&folder).expect("pulled folder").count();
     assert!(files >= 2, "{} holds {files} files", folder.display());
-    let eval = text(&run(crossroads()
+    let eval = text(&run(crate::crossroads()
+        .command()
         .args(["eval", "--scenario", "left", "--trials", "50", "--policy"])
         .arg(&folder)));
     assert!(
@@ -859,7 +852,7 @@ fn compose_trains_with_tls_and_a_token(
         }
     };
     let save = |tls: bool, token: bool, url: &str| {
-        let mut c = crossroads();
+        let mut c = crate::crossroads().command();
         c.args(["checkpoints", "--learner", url, "--json", "save"]);
         if tls {
             with(&mut c, token);
@@ -922,11 +915,10 @@ fn make_certs() -> tempfile::TempDir {
             CROSSROADS_REQUIRE_DOCKER=1 cargo test -- --include-ignored"]
 fn compose_tls_override_mounts_the_certificates_into_every_role() {
     let Some(program) = compose_program() else {
-        assert!(
-            !required(),
-            "neither `docker compose` nor `docker-compose` works"
+        gates::skip_unless_required(
+            Need::Docker,
+            "neither `docker compose` nor `docker-compose` works",
         );
-        eprintln!("skipped: no docker compose");
         return;
     };
     let certs = make_certs();
@@ -1024,12 +1016,13 @@ fn kubernetes_tls_overlay_mounts_the_secret_into_every_workload() {
         assert!(w.contains("fsGroup: 10001"), "{w}");
     }
     if !validator().exists() {
-        assert!(
-            !required(),
-            "{} is missing; scripts/setup-python.sh installs it",
-            validator().display()
+        gates::skip_unless_required(
+            Need::Docker,
+            &format!(
+                "{} is missing; scripts/setup-python.sh installs it",
+                validator().display()
+            ),
         );
-        eprintln!("skipped: no kubernetes-validate");
         return;
     }
     let dir = tempfile::tempdir().expect("temp dir");

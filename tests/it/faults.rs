@@ -20,11 +20,12 @@ use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, Transit
 use rand::{RngExt, SeedableRng};
 use std::sync::Mutex;
 
-use crate::procs::Proc;
+use crossroads_test_support::gates::{self, Need};
+use crossroads_test_support::{RoleProcess, crash_copy};
 
 /// Whether this is the long suite: `CROSSROADS_LONG_FAULTS=1`.
 fn long() -> bool {
-    std::env::var("CROSSROADS_LONG_FAULTS").is_ok_and(|v| v == "1")
+    gates::is_on(gates::LONG_FAULTS)
 }
 
 /// Kill rounds: `quick` in `make test`, `long` in the long suite.
@@ -77,9 +78,9 @@ fn tagged(tag: u32) -> TransitionBatch {
     b
 }
 
-fn start_replay(dir: &Path) -> (Proc, String, Duration) {
+fn start_replay(dir: &Path) -> (RoleProcess, String, Duration) {
     let started = Instant::now();
-    let p = Proc::spawn(&[
+    let p = crate::crossroads().spawn_role(&[
         "replay".as_ref(),
         "--listen".as_ref(),
         "127.0.0.1:0".as_ref(),
@@ -229,7 +230,7 @@ fn the_learner_killed_at_random_moments_restarts_from_a_whole_checkpoint_above_e
     let rt = runtime();
     // Clients connect lazily, on this runtime.
     let _enter = rt.enter();
-    let replay = Proc::spawn(&[
+    let replay = crate::crossroads().spawn_role(&[
         "replay",
         "--listen",
         "127.0.0.1:0",
@@ -289,7 +290,7 @@ fn the_learner_killed_at_random_moments_restarts_from_a_whole_checkpoint_above_e
     let (mut highest, mut recoveries) = (0u64, Vec::new());
     for round in 0..=rounds {
         let started = Instant::now();
-        let learner = Proc::spawn(&args);
+        let learner = crate::crossroads().spawn_role(&args);
         let addr = learner.addr("learner listening");
         let c = learner_client(&addr);
         let status = rt.block_on(c.status()).expect("status");
@@ -371,7 +372,7 @@ fn start_actor(
     transport: &str,
     replay: &str,
     learner: &str,
-) -> (Proc, String) {
+) -> (RoleProcess, String) {
     let index = index.to_string();
     let own = [
         "--set",
@@ -394,7 +395,7 @@ fn start_actor(
         "--learner",
         learner,
     ];
-    let p = Proc::spawn(&[common, &own[..]].concat());
+    let p = crate::crossroads().spawn_role(&[common, &own[..]].concat());
     let metrics = p.addr("serving metrics");
     (p, metrics)
 }
@@ -417,7 +418,7 @@ fn actors_killed_at_random_moments_leave_the_replay_and_the_learner_training() {
     .concat();
     // Shared memory on: one actor writes into the replay's memory and
     // reads the learner's, and is killed in the middle of it.
-    let replay = Proc::spawn(
+    let replay = crate::crossroads().spawn_role(
         &[
             &common[..],
             &[
@@ -439,7 +440,7 @@ fn actors_killed_at_random_moments_leave_the_replay_and_the_learner_training() {
     let [replay_addr, replay_metrics] =
         replay.addrs(["replay server listening", "serving metrics"]);
     let replay_url = format!("http://{replay_addr}");
-    let learner = Proc::spawn(
+    let learner = crate::crossroads().spawn_role(
         &[
             &common[..],
             &[
@@ -470,7 +471,7 @@ fn actors_killed_at_random_moments_leave_the_replay_and_the_learner_training() {
         )
         .unwrap_or(0.0)
     };
-    let mut actors: Vec<(Proc, String)> = transports
+    let mut actors: Vec<(RoleProcess, String)> = transports
         .iter()
         .enumerate()
         .map(|(i, t)| start_actor(&common, i, t, &replay_url, &learner_url))
@@ -588,11 +589,10 @@ impl SmallDisk {
                     Ok(o) => String::from_utf8_lossy(&o.stderr).trim().to_owned(),
                     Err(e) => e.to_string(),
                 };
-                assert!(
-                    !std::env::var("CROSSROADS_REQUIRE_MOUNT").is_ok_and(|v| v == "1"),
-                    "cannot mount a tmpfs ({why}) but CROSSROADS_REQUIRE_MOUNT=1"
+                gates::skip_unless_required(
+                    Need::Mount,
+                    &format!("cannot mount a tmpfs here ({why}); run as root"),
                 );
-                eprintln!("skipped: cannot mount a tmpfs here ({why}); run as root");
                 None
             }
         }
@@ -712,7 +712,7 @@ fn a_full_replay_disk_fails_writes_clearly_corrupts_nothing_and_keeps_serving() 
         acked.push(t);
     }
     let crashed = tempfile::tempdir().expect("temp dir");
-    copy_dir(&disk.path().join("replay"), crashed.path());
+    crash_copy(&disk.path().join("replay"), crashed.path());
     shutdown.trigger();
     rt.block_on(server.join()).expect("clean stop");
     let (replay, addr, _) = start_replay(crashed.path());
@@ -725,20 +725,6 @@ fn a_full_replay_disk_fails_writes_clearly_corrupts_nothing_and_keeps_serving() 
          inserts refused with UNAVAILABLE naming the disk while full; samples served throughout",
         acked.len()
     );
-}
-
-/// What a kill -9 leaves: the folder's files as they are on disk now.
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mkdir");
-    for entry in std::fs::read_dir(from).expect("list") {
-        let entry = entry.expect("entry");
-        let target = to.join(entry.file_name());
-        if entry.file_type().expect("type").is_dir() {
-            copy_dir(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).expect("copy");
-        }
-    }
 }
 
 /// A network namespace with a veth pair to this one: the host side is
@@ -808,11 +794,10 @@ impl Netns {
         match made {
             Ok(()) => Some(ns),
             Err(why) => {
-                assert!(
-                    !std::env::var("CROSSROADS_REQUIRE_MOUNT").is_ok_and(|v| v == "1"),
-                    "cannot make a network namespace ({why}) but CROSSROADS_REQUIRE_MOUNT=1"
+                gates::skip_unless_required(
+                    Need::Mount,
+                    &format!("cannot make a network namespace here ({why}); run as root"),
                 );
-                eprintln!("skipped: cannot make a network namespace here ({why}); run as root");
                 None
             }
         }
@@ -919,7 +904,7 @@ fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts(
             .expect("a port")
     };
     let listen = format!("{host}:0");
-    let replay = Proc::spawn(&with_common(&[
+    let replay = crate::crossroads().spawn_role(&with_common(&[
         "--set",
         "replay.min_size_to_sample=200",
         "replay",
@@ -933,7 +918,7 @@ fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts(
     ]));
     let replay_addr = replay.addr("replay server listening");
     let replay_url = format!("http://{replay_addr}");
-    let learner = Proc::spawn(&with_common(&[
+    let learner = crate::crossroads().spawn_role(&with_common(&[
         "learner",
         "--listen",
         &listen,
@@ -945,9 +930,9 @@ fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts(
     let learner_url = format!("http://{learner_addr}");
     let metrics = format!("{}.2:9464", ns.prefix);
     let metrics_addr = format!("telemetry.metrics_addr={metrics}");
-    let mut actor = Proc::spawn_in(
-        &ns.name,
-        &with_common(&[
+    let mut actor = crate::crossroads()
+        .under(&["ip", "netns", "exec", ns.name.as_str()])
+        .spawn_role(&with_common(&[
             "--set",
             "telemetry.metrics=true",
             "--set",
@@ -973,8 +958,7 @@ fn partitions_of_an_actor_from_the_replay_and_the_learner_heal_without_restarts(
             &replay_url,
             "--learner",
             &learner_url,
-        ]),
-    );
+        ]));
     let (replay_port, learner_port) = (port_of(&replay_addr), port_of(&learner_addr));
     let pushed = || scrape(&metrics, "crossroads_actor_transitions_pushed_total").unwrap_or(0.0);
     let actor_version = || scrape(&metrics, "crossroads_actor_weights_version").unwrap_or(0.0);

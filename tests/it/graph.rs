@@ -101,3 +101,15 @@ fn the_crate_graph_keeps_each_crate_to_its_part() {
         }
     }
 }
+
+/// What the tests share is never shipped: the binary, which links every
+/// library crate, links no test support.
+#[test]
+fn test_support_stays_a_dev_dependency() {
+    let deps = normal_dependencies("crossroads");
+    assert!(deps.len() > 2, "crossroads: no dependencies read: {deps:?}");
+    assert!(
+        !deps.contains("crossroads-test-support"),
+        "crossroads-test-support is a normal dependency; it belongs in [dev-dependencies]"
+    );
+}

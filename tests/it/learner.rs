@@ -2,72 +2,17 @@
 //! them: real processes, a real replay server, loopback gRPC, SIGTERM, and
 //! `crossroads bench learner`.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
-use std::time::Duration;
+use std::process::Output;
 
 use crossroads_config::TransportConfig;
 use crossroads_transport::grpc::ReplayClient;
 
-/// Starts `crossroads <args>` and returns it with the `addr=` of the log
-/// line containing `ready`.
-fn spawn(args: &[&str], ready: &str) -> (Child, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(["--set", "telemetry.metrics=false"])
-        .args(args)
-        .env_remove("CROSSROADS_CONFIG")
-        .env_remove("CROSSROADS_TOKEN")
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .expect("spawn crossroads");
-    let stderr = child.stderr.take().expect("stderr");
-    let (tx, rx) = std::sync::mpsc::channel();
-    let ready = ready.to_owned();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if line.contains(&ready)
-                && let Some(addr) = line
-                    .split_whitespace()
-                    .find_map(|w| w.strip_prefix("addr="))
-            {
-                let _ = tx.send(addr.to_owned());
-            }
-        }
-    });
-    let addr = rx
-        .recv_timeout(Duration::from_secs(60))
-        .unwrap_or_else(|_| panic!("{args:?} never logged {:?}", "ready"));
-    (child, addr)
-}
-
-fn terminate(mut child: Child) {
-    let status = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("kill");
-    assert!(status.success());
-    let start = std::time::Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            assert!(status.success(), "exit status {status}");
-            return;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(60),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
 fn checkpoints(learner: &str, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    crate::crossroads()
+        .command()
         .args(["checkpoints", "--learner", &format!("http://{learner}")])
         .args(args)
-        .env_remove("CROSSROADS_TOKEN")
         .output()
         .expect("run crossroads checkpoints")
 }
@@ -115,17 +60,15 @@ fn learner_args(replay: &str, dir: &Path, token_file: &Path) -> Vec<String> {
 #[test]
 fn learner_and_checkpoints_commands_work_together() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (replay, replay_addr) = spawn(
-        &[
-            "replay",
-            "--listen",
-            "127.0.0.1:0",
-            "--no-shm",
-            "--set",
-            "replay.min_size_to_sample=1",
-        ],
-        "replay server listening",
-    );
+    let replay = crate::crossroads().spawn_role(&[
+        "replay",
+        "--listen",
+        "127.0.0.1:0",
+        "--no-shm",
+        "--set",
+        "replay.min_size_to_sample=1",
+    ]);
+    let replay_addr = replay.addr("replay server listening");
     let mut config = crossroads_config::Config::default();
     config.sim.action_set = "sequential".to_owned();
     config.sim.observation = Some("sequential".to_owned());
@@ -137,8 +80,8 @@ fn learner_and_checkpoints_commands_work_together() {
     let token_file = dir.path().join("token");
     std::fs::write(&token_file, "tok3n\n").expect("token file");
     let args = learner_args(&replay_addr, &ckpts, &token_file);
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let (learner, addr) = spawn(&args, "learner listening");
+    let learner = crate::crossroads().spawn_role(&args);
+    let addr = learner.addr("learner listening");
 
     let out = checkpoints(&addr, &["list"]);
     assert!(
@@ -218,15 +161,16 @@ fn learner_and_checkpoints_commands_work_together() {
 
     // SIGTERM writes a last checkpoint.
     let before = std::fs::read_dir(&ckpts).expect("list").count();
-    terminate(learner);
+    learner.terminate();
     let after = std::fs::read_dir(&ckpts).expect("list").count();
     assert!(after > before || after == 3, "{before} -> {after}");
-    terminate(replay);
+    replay.terminate();
 }
 
 #[test]
 fn learner_refuses_a_bad_learner_config_naming_the_key() {
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let out = crate::crossroads()
+        .command()
         .args([
             "--set",
             "learner.optimizer=sgd",
@@ -234,7 +178,6 @@ fn learner_refuses_a_bad_learner_config_naming_the_key() {
             "learner.target_tau=0",
         ])
         .args(["learner", "--no-shm"])
-        .env_remove("CROSSROADS_CONFIG")
         .output()
         .expect("run");
     assert!(!out.status.success());
@@ -244,7 +187,8 @@ fn learner_refuses_a_bad_learner_config_naming_the_key() {
 
 #[test]
 fn bench_learner_prints_measured_figures() {
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let out = crate::crossroads()
+        .command()
         .args([
             "--set",
             "learner.hidden=[32]",
@@ -253,7 +197,6 @@ fn bench_learner_prints_measured_figures() {
         ])
         .args(["bench", "learner", "--rounds", "1", "--seconds", "0.2"])
         .args(["--fed-updates", "20", "--no-pytorch", "--json"])
-        .env_remove("CROSSROADS_CONFIG")
         .output()
         .expect("run");
     assert!(

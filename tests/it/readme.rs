@@ -5,7 +5,8 @@
 //! it.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+use crossroads_test_support::gates;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -64,14 +65,25 @@ const SMALL: &[(&str, &str)] = &[
     ("CROSSROADS_TRAIN__CONFIRM_TRIALS", "50"),
 ];
 
+/// The slow test's first claim, in plain `cargo test` too.
 #[test]
+fn the_quick_start_begins_with_make_run() {
+    let lines = quick_start_block(0);
+    assert!(
+        lines.first().is_some_and(|l| l == "make run"),
+        "the quick start begins with make run: {lines:?}"
+    );
+}
+
+#[test]
+#[ignore = "slow: CROSSROADS_SLOW_TESTS=1 cargo test -- --include-ignored (make test runs it)"]
 fn the_quick_start_runs_as_written_from_a_fresh_folder() {
     let lines = quick_start_block(0);
     assert!(
         lines.first().is_some_and(|l| l == "make run"),
         "the quick start begins with make run: {lines:?}"
     );
-    if !crate::slow_tests_enabled("readme::the_quick_start_runs_as_written_from_a_fresh_folder") {
+    if !gates::slow_tests_enabled("readme::the_quick_start_runs_as_written_from_a_fresh_folder") {
         return;
     }
     // A fresh folder, with the repository's committed report beside it
@@ -90,11 +102,8 @@ fn the_quick_start_runs_as_written_from_a_fresh_folder() {
                 .unwrap_or_else(|| panic!("not a crossroads command: {line}"));
             (args.split_whitespace().map(str::to_owned).collect(), false)
         };
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_crossroads"));
+        let mut cmd = crate::crossroads().command();
         cmd.args(&args).current_dir(dir.path());
-        for (key, _) in std::env::vars().filter(|(k, _)| k.starts_with("CROSSROADS_")) {
-            cmd.env_remove(key);
-        }
         if small {
             cmd.envs(SMALL.iter().copied());
         }

@@ -1,115 +1,42 @@
 //! `crossroads replay` as an operator runs it: flags over the config, port
 //! 0, SIGTERM, a snapshot on the way out, restored on the way back in.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use crossroads_config::TransportConfig;
+use crossroads_test_support::{RoleProcess, toy_batch};
 use crossroads_transport::grpc::ReplayClient;
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+
+/// How long the server has to log its address, and to exit after SIGTERM.
+const PATIENCE: Duration = Duration::from_secs(30);
 
 /// Starts the server and returns it with the address it logged.
-fn start(dir: &std::path::Path) -> (Child, String) {
+fn start(dir: &std::path::Path) -> (RoleProcess, String) {
     start_with(dir, "telemetry.metrics=false")
 }
 
 /// [`start`] with one more `--set`.
-fn start_with(dir: &std::path::Path, set: &str) -> (Child, String) {
-    let mut args: Vec<std::ffi::OsString> = [
-        "--set",
-        set,
-        "replay",
-        "--listen",
-        "127.0.0.1:0",
-        "--no-shm",
-        "--capacity",
-        "100",
-        "--table",
-        "cli",
-        "--snapshot-dir",
-    ]
-    .into_iter()
-    .map(Into::into)
-    .collect();
-    args.push(dir.into());
-    let (child, lines) = spawn_logging(&args);
-    let start = std::time::Instant::now();
-    while start.elapsed() < Duration::from_secs(30) {
-        if let Ok(line) = lines.recv_timeout(Duration::from_secs(1))
-            && line.contains("replay server listening")
-            && let Some(addr) = line
-                .split_whitespace()
-                .find_map(|w| w.strip_prefix("addr="))
-        {
-            return (child, addr.to_owned());
-        }
-    }
-    panic!("the server never logged its address");
-}
-
-/// Runs `crossroads args` with its log lines (stderr, info level) sent to
-/// the returned channel.
-fn spawn_logging<S: AsRef<std::ffi::OsStr>>(
-    args: &[S],
-) -> (Child, std::sync::mpsc::Receiver<String>) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(args)
-        .env_remove("CROSSROADS_CONFIG")
-        .env_remove("CROSSROADS_ACTOR__INDEX")
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .expect("spawn crossroads");
-    let stderr = child.stderr.take().expect("stderr");
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    (child, rx)
-}
-
-fn terminate(mut child: Child) {
-    let status = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("kill");
-    assert!(status.success());
-    let start = std::time::Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().expect("wait") {
-            assert!(status.success(), "exit status {status}");
-            return;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "no exit after SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
-fn batch() -> TransitionBatch {
-    let mut b = TransitionBatch::new(ObservationSpec::ttg(), 5, ObservationEncoding::SparseF32);
-    let mut grid = vec![0.0; ObservationSpec::ttg().num_values().expect("a shape")];
-    let mut current = b.push_observation(&grid);
-    for i in 0..10 {
-        grid[i * 3 + 2] = 1.0;
-        let next = b.push_observation(&grid);
-        b.push(Transition {
-            observation: current,
-            action: (i % 5) as u32,
-            reward: i as f32,
-            discount: 0.99,
-            priority: 1.0,
-            next_observation: next,
-        });
-        current = next;
-    }
-    b
+fn start_with(dir: &std::path::Path, set: &str) -> (RoleProcess, String) {
+    let server = RoleProcess::spawn(
+        crate::crossroads()
+            .command()
+            .args([
+                "--set",
+                set,
+                "replay",
+                "--listen",
+                "127.0.0.1:0",
+                "--no-shm",
+                "--capacity",
+                "100",
+                "--table",
+                "cli",
+                "--snapshot-dir",
+            ])
+            .arg(dir),
+    );
+    let addr = server.addr_within("replay server listening", PATIENCE);
+    (server, addr)
 }
 
 #[test]
@@ -123,16 +50,20 @@ fn replay_serves_until_sigterm_and_restores_its_snapshot() {
             .build()
             .expect("runtime")
     };
-    let (child, addr) = start(dir.path());
+    let (mut child, addr) = start(dir.path());
     let transport = TransportConfig {
         replay_endpoint: format!("http://{addr}"),
         ..TransportConfig::default()
     };
     let ack = runtime()
-        .block_on(async { ReplayClient::new(&transport, "cli")?.insert(batch()).await })
+        .block_on(async {
+            ReplayClient::new(&transport, "cli")?
+                .insert(toy_batch())
+                .await
+        })
         .expect("insert");
     assert_eq!((ack.inserted, ack.table_size), (10, 10));
-    terminate(child);
+    child.terminate_within(PATIENCE);
     let snapshots: Vec<_> = std::fs::read_dir(dir.path())
         .expect("list")
         .filter_map(|e| e.ok())
@@ -140,7 +71,7 @@ fn replay_serves_until_sigterm_and_restores_its_snapshot() {
         .collect();
     assert_eq!(snapshots.len(), 1, "one snapshot written at SIGTERM");
 
-    let (child, addr) = start(dir.path());
+    let (mut child, addr) = start(dir.path());
     let transport = TransportConfig {
         replay_endpoint: format!("http://{addr}"),
         ..TransportConfig::default()
@@ -153,7 +84,7 @@ fn replay_serves_until_sigterm_and_restores_its_snapshot() {
         (10, 100),
         "restored after a restart"
     );
-    terminate(child);
+    child.terminate_within(PATIENCE);
 }
 
 /// `crossroads health` (a container's health check) answers for a live
@@ -165,15 +96,15 @@ fn health_follows_the_role_s_liveness() {
         .and_then(|l| l.local_addr())
         .expect("a free port")
         .port();
-    let (child, _) = start_with(
+    let (mut child, _) = start_with(
         dir.path(),
         &format!("telemetry.metrics_addr=127.0.0.1:{port}"),
     );
     let health = || {
-        Command::new(env!("CARGO_BIN_EXE_crossroads"))
+        crate::crossroads()
+            .command()
             .args(["--set", &format!("telemetry.metrics_addr=0.0.0.0:{port}")])
             .args(["health", "--timeout-ms", "3000"])
-            .env_remove("CROSSROADS_CONFIG")
             .output()
             .expect("crossroads health")
     };
@@ -183,7 +114,7 @@ fn health_follows_the_role_s_liveness() {
         String::from_utf8_lossy(&up.stdout).trim(),
         format!("ok: http://127.0.0.1:{port}/healthz")
     );
-    terminate(child);
+    child.terminate_within(PATIENCE);
     let down = health();
     assert_eq!(down.status.code(), Some(1));
     let err = String::from_utf8_lossy(&down.stderr);
@@ -199,9 +130,7 @@ fn health_follows_the_role_s_liveness() {
 /// is up it waits, and SIGTERM meanwhile is a clean stop.
 #[test]
 fn an_actor_waiting_for_its_index_stops_cleanly() {
-    let (child, rx) = spawn_logging(&[
-        "--set",
-        "telemetry.metrics=false",
+    let mut actor = crate::crossroads().spawn_role(&[
         "actor",
         "--transport",
         "grpc",
@@ -212,32 +141,18 @@ fn an_actor_waiting_for_its_index_stops_cleanly() {
         "--learner",
         "http://127.0.0.1:1",
     ]);
-    let waiting = |rx: &std::sync::mpsc::Receiver<String>, needle: &str| {
-        let start = std::time::Instant::now();
-        while start.elapsed() < Duration::from_secs(30) {
-            if let Ok(line) = rx.recv_timeout(Duration::from_secs(1))
-                && line.contains(needle)
-            {
-                return true;
-            }
-        }
-        false
-    };
+    let waiting = |actor: &RoleProcess, needle: &str| actor.wait_for(needle, PATIENCE).is_some();
     assert!(waiting(
-        &rx,
+        &actor,
         "waiting for the replay server to hand out an index"
     ));
-    terminate(child);
-    assert!(waiting(&rx, "actor stopped before it started acting"));
+    actor.terminate_within(PATIENCE);
+    assert!(waiting(&actor, "actor stopped before it started acting"));
 }
 
 #[test]
 fn replay_flags_are_validated_like_the_config() {
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(["replay", "--capacity", "0", "--no-shm"])
-        .env_remove("CROSSROADS_CONFIG")
-        .output()
-        .expect("run");
+    let out = crate::crossroads().output(&["replay", "--capacity", "0", "--no-shm"]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(

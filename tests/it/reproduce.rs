@@ -5,15 +5,9 @@
 //! (two runs) on a tiny budget.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn crossroads(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(args)
-        .env_remove("CROSSROADS_CONFIG")
-        .output()
-        .expect("run crossroads")
-}
+use crossroads_test_support::gates;
 
 fn reproduce(out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![
@@ -25,7 +19,7 @@ fn reproduce(out: &Path, extra: &[&str]) -> Output {
         out.to_str().expect("utf-8"),
     ];
     args.extend_from_slice(extra);
-    crossroads(&args)
+    crate::crossroads().output(&args)
 }
 
 fn cell_trials(cell: &serde_json::Value) -> u64 {
@@ -56,8 +50,9 @@ fn assert_shielded(cell: &serde_json::Value, inner: &str, row: &serde_json::Valu
 }
 
 #[test]
+#[ignore = "slow: CROSSROADS_SLOW_TESTS=1 cargo test -- --include-ignored (make test runs it)"]
 fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
-    if !crate::slow_tests_enabled(
+    if !gates::slow_tests_enabled(
         "reproduce::quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs",
     ) {
         return;
@@ -177,7 +172,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     assert!(!log2.contains("training into"), "{log2}");
 
     // A full reproduction into a quick report folder is refused.
-    let o = crossroads(&[
+    let o = crate::crossroads().output(&[
         "--set",
         "telemetry.metrics_addr=127.0.0.1:0",
         "reproduce",
@@ -267,7 +262,7 @@ fn a_tiny_reproduction_of_table2_trains_evaluates_reports_and_reuses() {
 fn safety_across_drivers_alone_writes_its_own_report() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("report");
-    let o = crossroads(&[
+    let o = crate::crossroads().output(&[
         "reproduce",
         "--baselines-only",
         "--only",
@@ -334,7 +329,7 @@ fn reproduce_refuses_a_config_file() {
     let dir = tempfile::tempdir().expect("temp dir");
     let cfg = dir.path().join("c.toml");
     std::fs::write(&cfg, "").expect("write");
-    let o = crossroads(&[
+    let o = crate::crossroads().output(&[
         "--config",
         cfg.to_str().expect("utf-8"),
         "reproduce",
@@ -356,7 +351,7 @@ fn reproduce_refuses_a_config_file() {
 fn baselines_only_measures_ttc_without_training_or_weights() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("report");
-    let o = crossroads(&[
+    let o = crate::crossroads().output(&[
         "reproduce",
         "--baselines-only",
         "--only",

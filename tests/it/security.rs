@@ -10,10 +10,10 @@ use std::time::Duration;
 
 use crossroads_common::Shutdown;
 use crossroads_config::{Config, TransportConfig};
+use crossroads_test_support::toy_batch;
 use crossroads_transport::auth::Token;
 use crossroads_transport::grpc::{ClientError, ReplayClient};
 use crossroads_transport::{ClientSecurity, LearnerClient, LearnerClientError};
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
 use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer, KeyPair,
     KeyUsagePurpose,
@@ -117,26 +117,6 @@ fn config() -> Config {
     c
 }
 
-fn batch() -> TransitionBatch {
-    let mut b = TransitionBatch::new(ObservationSpec::ttg(), 5, ObservationEncoding::SparseF32);
-    let mut grid = vec![0.0; ObservationSpec::ttg().num_values().expect("a shape")];
-    let mut current = b.push_observation(&grid);
-    for i in 0..10 {
-        grid[i * 3 + 2] = 1.0;
-        let next = b.push_observation(&grid);
-        b.push(Transition {
-            observation: current,
-            action: (i % 5) as u32,
-            reward: i as f32,
-            discount: 0.99,
-            priority: 1.0,
-            next_observation: next,
-        });
-        current = next;
-    }
-    b
-}
-
 /// A replay client of the server at `addr` as `transport` describes the
 /// client side.
 fn replay_client(
@@ -185,7 +165,7 @@ fn tls_with_token_carries_inserts_samples_and_weights_and_guards_every_mutating_
             .await
             .expect("replay over TLS");
         let client = replay_client(&c.transport, "https", replay.local_addr());
-        let ack = client.insert(batch()).await.expect("insert over TLS");
+        let ack = client.insert(toy_batch()).await.expect("insert over TLS");
         assert_eq!(ack.inserted, 10);
         let sample = client
             .sample(4, 0.4, Duration::from_secs(5))
@@ -205,7 +185,7 @@ fn tls_with_token_carries_inserts_samples_and_weights_and_guards_every_mutating_
         anonymous.auth.token_file = None;
         let anonymous = replay_client(&anonymous, "https", replay.local_addr());
         let missing = "missing authorization metadata";
-        assert_unauthenticated(anonymous.insert(batch()).await, missing);
+        assert_unauthenticated(anonymous.insert(toy_batch()).await, missing);
         assert_unauthenticated(
             anonymous.sample(4, 0.4, Duration::from_secs(1)).await,
             missing,
@@ -229,7 +209,7 @@ fn tls_with_token_carries_inserts_samples_and_weights_and_guards_every_mutating_
         wrong.auth.token_file = Some(wrong_file);
         let wrong = replay_client(&wrong, "https", replay.local_addr());
         let differs = "does not match";
-        assert_unauthenticated(wrong.insert(batch()).await, differs);
+        assert_unauthenticated(wrong.insert(toy_batch()).await, differs);
         assert_unauthenticated(wrong.sample(4, 0.4, Duration::from_secs(1)).await, differs);
         assert_unauthenticated(wrong.join_actor("c").await, differs);
         assert_eq!(client.info().await.expect("info").size, 10);
@@ -421,7 +401,7 @@ fn mutual_tls_refuses_a_client_without_a_certificate() {
         for _ in 0..3 {
             let err = no_cert.info().await.expect_err("no client certificate");
             assert!(err.to_string().contains("transport error"), "{err}");
-            assert!(no_cert.insert(batch()).await.is_err());
+            assert!(no_cert.insert(toy_batch()).await.is_err());
         }
 
         let with_cert = replay_client(&c.transport, "https", addr);
@@ -431,7 +411,11 @@ fn mutual_tls_refuses_a_client_without_a_certificate() {
             "nothing got in"
         );
         assert_eq!(
-            with_cert.insert(batch()).await.expect("insert").inserted,
+            with_cert
+                .insert(toy_batch())
+                .await
+                .expect("insert")
+                .inserted,
             10
         );
         shutdown.trigger();
@@ -530,9 +514,9 @@ fn a_tiny_train_run_works_over_mutual_tls_with_a_token() {
         ]
         .map(str::to_owned),
     );
-    let o = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let o = crate::crossroads()
+        .command()
         .args(&args)
-        .env_remove("CROSSROADS_CONFIG")
         .env("CROSSROADS_TOKEN", TOKEN)
         .env("RUST_LOG", "info")
         .output()
@@ -601,7 +585,7 @@ fn make_certs_script_makes_certificates_the_servers_and_clients_accept() {
             t.replay_endpoint = format!("https://{host}:{port}");
             let client = ReplayClient::new(&t, &c.replay.table).expect("client");
             let ack = client
-                .insert(batch())
+                .insert(toy_batch())
                 .await
                 .unwrap_or_else(|e| panic!("insert by {host}: {e}"));
             assert_eq!(ack.inserted, 10, "{host}");
@@ -610,7 +594,7 @@ fn make_certs_script_makes_certificates_the_servers_and_clients_accept() {
         no_token.auth.token_file = None;
         assert_unauthenticated(
             replay_client(&no_token, "https", replay.local_addr())
-                .insert(batch())
+                .insert(toy_batch())
                 .await,
             "missing authorization metadata",
         );

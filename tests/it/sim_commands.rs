@@ -1,13 +1,8 @@
 //! `crossroads eval`, `tune-ttc` and `bench sim` as a user runs them.
 
-use std::process::Command;
-
+/// Whether `crossroads args` succeeded, its standard output and error.
 fn crossroads(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_crossroads"))
-        .args(args)
-        .env_remove("CROSSROADS_CONFIG")
-        .output()
-        .expect("run crossroads");
+    let out = crate::crossroads().output(args);
     (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),

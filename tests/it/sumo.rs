@@ -15,6 +15,8 @@
 use std::path::Path;
 use std::process::Command;
 
+use crossroads_test_support::gates::{self, Need};
+
 fn sumo_python() -> Option<std::path::PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let py = root.join(".venv/bin/python3");
@@ -31,19 +33,17 @@ fn sumo_python() -> Option<std::path::PathBuf> {
             CROSSROADS_REQUIRE_SUMO=1 cargo test -- --include-ignored"]
 fn quick_sumo_check_finds_no_drift() {
     let Some(python) = sumo_python() else {
-        assert!(
-            std::env::var("CROSSROADS_REQUIRE_SUMO").as_deref() != Ok("1"),
-            "SUMO is required (CROSSROADS_REQUIRE_SUMO=1) but .venv has no libsumo: \
-             run scripts/setup-python.sh --sumo"
+        gates::skip_unless_required(
+            Need::Sumo,
+            ".venv has no libsumo: run scripts/setup-python.sh --sumo",
         );
-        eprintln!("skipped: no SUMO in .venv (scripts/setup-python.sh --sumo)");
         return;
     };
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = tempfile::tempdir().expect("temporary folder");
-    let done = Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    let done = crate::crossroads()
+        .command()
         .current_dir(root)
-        .env_remove("CROSSROADS_CONFIG")
         .args(["sumo-check", "--quick", "--strict", "--out"])
         .arg(out.path())
         .arg("--python")

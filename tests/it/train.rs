@@ -6,9 +6,10 @@
 //! the same path on a budget too small to learn.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use crossroads::commands::train::{Evaluation, read_curve};
+use crossroads_test_support::gates;
 
 /// Warm-up and evaluations of a run long enough to learn.
 const LEARNING: &[&str] = &[
@@ -26,10 +27,11 @@ const TINY: &[&str] = &[
     "train.confirm_trials=50",
 ];
 
+/// `crossroads args` with info-level logs.
 fn crossroads(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_crossroads"))
+    crate::crossroads()
+        .command()
         .args(args)
-        .env_remove("CROSSROADS_CONFIG")
         .env("RUST_LOG", "info")
         .output()
         .expect("run crossroads")
@@ -159,8 +161,9 @@ fn check_resume(out: &Path, budget: &[&str], rows: &[Evaluation], before: u64, a
 }
 
 #[test]
+#[ignore = "slow: CROSSROADS_SLOW_TESTS=1 cargo test -- --include-ignored (make test runs it)"]
 fn training_across_real_processes_beats_the_untrained_network() {
-    if !crate::slow_tests_enabled(
+    if !gates::slow_tests_enabled(
         "train::training_across_real_processes_beats_the_untrained_network",
     ) {
         return;

@@ -208,16 +208,9 @@ fn cuda_or_skip(test: &str) -> bool {
     let why = resolve_device(DeviceSetting::Cuda)
         .err()
         .map_or_else(|| "no CUDA device".to_owned(), |e| e.to_string());
-    assert!(
-        std::env::var("CROSSROADS_REQUIRE_CUDA").as_deref() != Ok("1"),
-        "CUDA is required here (CROSSROADS_REQUIRE_CUDA=1) but {why}"
-    );
-    // Straight to the process's stderr: libtest captures only the print
-    // macros, so the line shows in a passing run too.
-    use std::io::Write;
-    let _ = writeln!(
-        std::io::stderr(),
-        "skipped: {test} needs a CUDA device and a CUDA libtorch ({why})"
+    crossroads_test_support::gates::skip_unless_required(
+        crossroads_test_support::Need::Cuda,
+        &format!("{test} needs a CUDA device and a CUDA libtorch ({why})"),
     );
     false
 }

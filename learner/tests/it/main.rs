@@ -12,23 +12,6 @@ mod training;
 use crossroads_model::{NetworkSpec, ObservationLayout, TrunkKind};
 use crossroads_types::{ObservationEncoding, ObservationSpec, TransitionBatch};
 
-/// Whether the slow tests run: `CROSSROADS_SLOW_TESTS=1`, as `make test`
-/// sets. Without it a slow test prints why it is skipped and returns; a
-/// quick twin covers the same path at a small budget.
-pub fn slow_tests_enabled(test: &str) -> bool {
-    if std::env::var("CROSSROADS_SLOW_TESTS").is_ok_and(|v| v == "1") {
-        return true;
-    }
-    // Straight to the process's stderr: libtest captures only the print
-    // macros, so the line shows in a passing run too.
-    use std::io::Write;
-    let _ = writeln!(
-        std::io::stderr(),
-        "skipped: set CROSSROADS_SLOW_TESTS=1 to run {test} (a slow training)"
-    );
-    false
-}
-
 /// A network over `n` one-hot states.
 pub fn toy_spec(n: i64, actions: i64, hidden: Vec<i64>) -> NetworkSpec {
     NetworkSpec {

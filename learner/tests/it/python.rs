@@ -11,6 +11,7 @@ use std::process::Command;
 
 use crossroads_learner::checkpoint::{CheckpointStore, NewCheckpoint, WEIGHTS_FILE};
 use crossroads_learner::{Trainer, TrainerConfig};
+use crossroads_test_support::gates::{self, Need};
 
 const SCRIPT: &str = r#"
 import json, sys
@@ -52,14 +53,12 @@ fn learner_weights_load_in_python_safetensors() {
             Ok(o) => String::from_utf8_lossy(&o.stderr).trim().to_owned(),
             Err(e) => e.to_string(),
         };
-        assert!(
-            std::env::var("CROSSROADS_REQUIRE_PYTHON").as_deref() != Ok("1"),
-            "Python safetensors is required here but {} cannot import it: {why}",
-            python.display()
-        );
-        eprintln!(
-            "skipped: Python safetensors is not available to {} ({why}); run scripts/setup-python.sh",
-            python.display()
+        gates::skip_unless_required(
+            Need::Python,
+            &format!(
+                "Python safetensors is not available to {} ({why}); run scripts/setup-python.sh",
+                python.display()
+            ),
         );
         return;
     }

@@ -9,6 +9,7 @@ use crossroads_common::Shutdown;
 use crossroads_config::Config;
 use crossroads_learner::bench::fill_replay;
 use crossroads_learner::{RunningLearner, TrainerConfig};
+use crossroads_test_support::crash_copy;
 use crossroads_transport::auth::Token;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_transport::{ClientSecurity, LearnerClient};
@@ -342,20 +343,6 @@ fn weights_reach_a_late_shared_memory_subscriber() {
     wrong.version = 5;
     publisher.publish(&wrong).unwrap();
     assert_eq!(subscriber.latest().unwrap(), None);
-}
-
-/// What a kill -9 leaves on disk: the folder's files as they are now.
-fn crash_copy(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mkdir");
-    for entry in std::fs::read_dir(from).expect("list") {
-        let entry = entry.expect("entry");
-        let target = to.join(entry.file_name());
-        if entry.file_type().expect("type").is_dir() {
-            crash_copy(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).expect("copy");
-        }
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

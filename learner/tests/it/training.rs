@@ -450,9 +450,11 @@ fn the_default_loss_learns_the_mean_return_either_side_of_break_even() {
 }
 
 #[test]
+#[ignore = "slow: CROSSROADS_SLOW_TESTS=1 cargo test -- --include-ignored (make test runs it)"]
 fn the_default_loss_learns_the_mean_return_of_a_risky_go() {
-    if !crate::slow_tests_enabled("training::the_default_loss_learns_the_mean_return_of_a_risky_go")
-    {
+    if !crossroads_test_support::gates::slow_tests_enabled(
+        "training::the_default_loss_learns_the_mean_return_of_a_risky_go",
+    ) {
         return;
     }
     let delta = crossroads_config::LearnerConfig::default().huber_delta;

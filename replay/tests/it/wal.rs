@@ -10,6 +10,7 @@ use crossroads_common::Shutdown;
 use crossroads_config::{Config, TransportConfig};
 use crossroads_replay::wal::{self, Wal, WalConfig};
 use crossroads_replay::{ReplayMetrics, RunningServer, TableImage};
+use crossroads_test_support::crash_copy;
 use crossroads_transport::grpc::ReplayClient;
 
 use crate::util::{WAIT, batch, prepared, server_config};
@@ -37,20 +38,6 @@ async fn stop(server: RunningServer, shutdown: Shutdown) {
         .await
         .expect("stops")
         .expect("clean stop");
-}
-
-/// What a kill -9 leaves: the folder's files as they are on disk now.
-fn crash_copy(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("mkdir");
-    for entry in std::fs::read_dir(from).expect("list") {
-        let entry = entry.expect("entry");
-        let target = to.join(entry.file_name());
-        if entry.file_type().expect("type").is_dir() {
-            crash_copy(&entry.path(), &target);
-        } else {
-            std::fs::copy(entry.path(), target).expect("copy");
-        }
-    }
 }
 
 /// Items by reward (the tag of `batch`), so lost or doubled transitions

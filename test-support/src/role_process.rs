@@ -1,41 +1,30 @@
-//! Real `crossroads` processes for the tests that start, stop and kill
-//! them: their log lines on a channel, the address they bind, SIGTERM and
-//! SIGKILL.
+//! A running role: its log lines on a channel, the address it binds,
+//! SIGTERM and SIGKILL.
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
-/// A running `crossroads` process and its log lines (stderr, info level).
+/// How long a role has to log an address or to exit after SIGTERM, unless
+/// the test says otherwise.
+const PATIENCE: Duration = Duration::from_secs(60);
+
+/// A running `crossroads` process and its log lines (standard error, info
+/// level). Dropping it kills the process, so a failed test leaves none
+/// behind.
 #[derive(Debug)]
-pub struct Proc {
+pub struct RoleProcess {
     child: Child,
     lines: Receiver<String>,
 }
 
-impl Proc {
-    /// Starts `crossroads args` without a config from the environment and
-    /// without metrics.
-    pub fn spawn<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Self {
-        Self::spawn_from(Command::new(env!("CARGO_BIN_EXE_crossroads")), args)
-    }
-
-    /// [`spawn`](Self::spawn) inside network namespace `netns`.
-    pub fn spawn_in<S: AsRef<std::ffi::OsStr>>(netns: &str, args: &[S]) -> Self {
-        let mut command = Command::new("ip");
-        command
-            .args(["netns", "exec", netns])
-            .arg(env!("CARGO_BIN_EXE_crossroads"));
-        Self::spawn_from(command, args)
-    }
-
-    fn spawn_from<S: AsRef<std::ffi::OsStr>>(mut command: Command, args: &[S]) -> Self {
+impl RoleProcess {
+    /// Starts `command` (from [`Crossroads::command`](crate::Crossroads::command),
+    /// with its arguments) with `RUST_LOG=info`, its standard error read
+    /// line by line onto a channel and its standard output discarded.
+    pub fn spawn(command: &mut Command) -> Self {
         let mut child = command
-            .args(["--set", "telemetry.metrics=false"])
-            .args(args)
-            .env_remove("CROSSROADS_CONFIG")
-            .env_remove("CROSSROADS_ACTOR__INDEX")
             .env("RUST_LOG", "info")
             .stderr(Stdio::piped())
             .stdout(Stdio::null())
@@ -51,7 +40,8 @@ impl Proc {
         Self { child, lines }
     }
 
-    /// The first log line containing `needle` within `timeout`.
+    /// The first log line containing `needle` within `timeout`; `None` if
+    /// none comes or the process closed its standard error first.
     pub fn wait_for(&self, needle: &str, timeout: Duration) -> Option<String> {
         let deadline = Instant::now() + timeout;
         while let Some(left) = deadline.checked_duration_since(Instant::now()) {
@@ -67,9 +57,14 @@ impl Proc {
     /// The `addr=` of the first log line containing `needle`; fails the
     /// test if none comes within a minute.
     pub fn addr(&self, needle: &str) -> String {
+        self.addr_within(needle, PATIENCE)
+    }
+
+    /// [`addr`](Self::addr) within `timeout`.
+    pub fn addr_within(&self, needle: &str, timeout: Duration) -> String {
         let line = self
-            .wait_for(needle, Duration::from_secs(60))
-            .unwrap_or_else(|| panic!("never logged {needle:?}"));
+            .wait_for(needle, timeout)
+            .unwrap_or_else(|| panic!("never logged {needle:?} within {timeout:?}"));
         addr_in(&line)
     }
 
@@ -78,7 +73,7 @@ impl Proc {
     /// within a minute.
     pub fn addrs<const N: usize>(&self, needles: [&str; N]) -> [String; N] {
         let mut found: [Option<String>; N] = std::array::from_fn(|_| None);
-        let deadline = Instant::now() + Duration::from_secs(60);
+        let deadline = Instant::now() + PATIENCE;
         while found.iter().any(Option::is_none) {
             let left = deadline.saturating_duration_since(Instant::now());
             let line = self
@@ -110,8 +105,15 @@ impl Proc {
         self.child.wait().expect("reap");
     }
 
-    /// SIGTERM, then waits (a minute at most) for a clean exit.
+    /// SIGTERM, then waits (a minute at most) for a clean exit: fails the
+    /// test on a non-zero status or no exit.
     pub fn terminate(mut self) {
+        self.terminate_within(PATIENCE);
+    }
+
+    /// [`terminate`](Self::terminate) with `limit` for the exit, keeping
+    /// the process's lines readable ([`wait_for`](Self::wait_for)) after.
+    pub fn terminate_within(&mut self, limit: Duration) {
         rustix::process::kill_process(
             rustix::process::Pid::from_child(&self.child),
             rustix::process::Signal::TERM,
@@ -123,18 +125,16 @@ impl Proc {
                 assert!(status.success(), "exit status {status}");
                 return;
             }
-            assert!(
-                start.elapsed() < Duration::from_secs(60),
-                "no exit after SIGTERM"
-            );
+            assert!(start.elapsed() < limit, "no exit after SIGTERM");
             std::thread::sleep(Duration::from_millis(50));
         }
     }
 }
 
-impl Drop for Proc {
+impl Drop for RoleProcess {
     fn drop(&mut self) {
-        // A failed test leaves no process behind.
+        // A failed test leaves no process behind; after a clean exit both
+        // calls are no-ops.
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
