@@ -39,14 +39,10 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crossroads_model::QNetwork;
-use crossroads_sim::{ActionSet, Env, EnvConfig, Outcome, Scenario, episode_seed};
+use crossroads_sim::{ActionSet, Env, EnvConfig, IN_VIEW_S, Outcome, Scenario, episode_seed};
 use rayon::prelude::*;
 use tch::nn::OptimizerConfig;
 use tch::{Kind, Tensor};
-
-/// Seconds of a car at the speed limit a view must cover upstream on every
-/// conflicting lane to count as in view (`sim::risk`'s rule).
-const IN_VIEW_S: f64 = 5.0;
 
 #[derive(Debug)]
 struct Args {

@@ -95,13 +95,9 @@ impl ActorShield {
         };
         let params = ShieldParams::parse(spec)
             .map_err(|e| ActorError::Config(format!("actor.shield: {e}")))?;
-        if action_set.absorbing_go().is_none() {
-            return Err(ActorError::Config(format!(
-                "actor.shield: the shield checks a final go, which the {} actions do not have \
-                 (use ttg or creep)",
-                action_set.name()
-            )));
-        }
+        action_set
+            .final_go_for("the shield", "it checks a final go")
+            .map_err(|e| ActorError::Config(format!("actor.shield: {e}")))?;
         Ok(Some(Self {
             params,
             veto_cost: config.veto_cost as f32,
@@ -801,15 +797,9 @@ impl Lane {
             values.q_values(self.envs.observations(), m, &mut self.q)
         }
         .map_err(|e| ActorError::Values(e.to_string()))?;
-        // The observations decided on, kept while a shield may veto.
-        let mut decided_on: Vec<Option<ObsRef>> = Vec::new();
         if training {
             for i in 0..m {
                 if let Some(obs) = self.current[i].take() {
-                    if self.shield.is_some() {
-                        decided_on.resize(m, None);
-                        decided_on[i] = Some(Arc::clone(&obs));
-                    }
                     self.assemblers[i].begin(obs, &self.q[i * a..(i + 1) * a], &mut self.emitted);
                 }
             }
@@ -832,7 +822,7 @@ impl Lane {
             }
         }
         if self.shield.is_some() {
-            self.shield_decisions(&mut decided_on);
+            self.shield_decisions(training);
         }
         if cut {
             // n-step returns follow the greedy policy: a window ends
@@ -855,9 +845,9 @@ impl Lane {
 
     /// The shield's checks of this decision's *go*s: a vetoed one becomes
     /// the network's best one-step alternative; when training, it is kept
-    /// (with the observation decided on, from `decided_on`) to be stored
-    /// beside the executed action.
-    fn shield_decisions(&mut self, decided_on: &mut [Option<ObsRef>]) {
+    /// (with the observation decided on, its n-step window's current one)
+    /// to be stored beside the executed action.
+    fn shield_decisions(&mut self, training: bool) {
         let Some(shield) = self.shield else { return };
         let a = self.envs.num_actions();
         for i in 0..self.envs.len() {
@@ -876,7 +866,10 @@ impl Lane {
             let fallback = shield_fallback(env, go, Some(q));
             self.actions[i] = fallback;
             self.vetoes += 1;
-            if let Some(observation) = decided_on.get_mut(i).and_then(Option::take) {
+            let decided_on = training
+                .then(|| self.assemblers[i].current_observation().cloned())
+                .flatten();
+            if let Some(observation) = decided_on {
                 let td = (q[fallback] - shield.veto_cost - q[go]).abs();
                 self.vetoed[i] = Some(VetoedGo {
                     observation,

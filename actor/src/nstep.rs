@@ -101,6 +101,12 @@ impl NStepAssembler {
         }
     }
 
+    /// The observation the next action is decided on (after
+    /// [`begin`](Self::begin), before [`record`](Self::record)).
+    pub fn current_observation(&self) -> Option<&ObsRef> {
+        self.current.as_ref().map(|(obs, _)| obs)
+    }
+
     /// Decisions waiting in the window.
     pub fn pending(&self) -> usize {
         self.window.len()

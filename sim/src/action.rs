@@ -71,6 +71,15 @@ impl ActionSet {
         }
     }
 
+    /// The index of the final *go* that `policy` needs (it checks or tries
+    /// one, `why`); an error naming both where the set has none.
+    pub fn final_go_for(self, policy: &str, why: &str) -> Result<usize, SimError> {
+        self.absorbing_go().ok_or_else(|| SimError::Unsupported {
+            policy: format!("{policy} ({why}: ttg or creep actions)"),
+            set: self.name(),
+        })
+    }
+
     /// Lower-case name, as parsed.
     pub fn name(self) -> &'static str {
         match self {

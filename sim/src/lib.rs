@@ -216,8 +216,8 @@ pub use policy::{
 };
 pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
 pub use risk::{
-    GoDecision, MissedReport, PROBE_EVERY_STEPS, RISKIEST_SHOWN, RiskBin, RiskOptions, RiskReport,
-    SafeChance, ValueMargins, ValueStats, go_risk,
+    GoDecision, IN_VIEW_S, MissedReport, PROBE_EVERY_STEPS, RISKIEST_SHOWN, RiskBin, RiskOptions,
+    RiskReport, SafeChance, ValueMargins, ValueStats, go_risk,
 };
 pub use scenario::{ConflictZone, EgoSpec, Lane, LaneSpec, Scenario, ScenarioSpec};
 pub use seed::{episode_seed, policy_seed, splitmix64};

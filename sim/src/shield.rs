@@ -1148,16 +1148,11 @@ mod tests {
         assert_eq!(threat, None);
     }
 
-    #[test]
-    fn a_shadow_may_hide_a_stream_of_cars_so_the_ego_never_goes_behind_its_phantom() {
-        // Traffic that does not react; a 40 m wall 6 m west of the centre
-        // hides the near lane from 8.5 m short of the ego's path on (seed 3
-        // trial 15 of ttc-creep:0 behind the shield on occluded-30). The
-        // phantom at the shadow's edge passes before the ego gets there,
-        // but the car 10 m behind it, unseen, does not.
+    /// `occluded` without traffic, a 40 m wall 6 m west of the centre
+    /// hiding the near lane, the ego at its stop line; and where, on the
+    /// near lane, the shield's phantom stands at the wall's shadow.
+    fn shadowed() -> (Env, f64) {
         let mut env = empty("occluded");
-        assert!(!env.scenario().spec().traffic_reacts);
-        let near = lane_in(&env, 0);
         let wall = OrientedRect::new(Vec2::new(-26.0, -4.0), 0.0, 40.0, 1.0);
         env.set_occluders(&[wall]);
         env.set_ego(env.scenario().spec().ego.stop_line_s, 0.0, false);
@@ -1167,6 +1162,19 @@ mod tests {
             .find(|c| c.phantom && c.lane == 0)
             .expect("a phantom where the wall's shadow starts")
             .s;
+        (env, edge)
+    }
+
+    #[test]
+    fn a_shadow_may_hide_a_stream_of_cars_so_the_ego_never_goes_behind_its_phantom() {
+        // Traffic that does not react; a 40 m wall 6 m west of the centre
+        // hides the near lane from 8.5 m short of the ego's path on (seed 3
+        // trial 15 of ttc-creep:0 behind the shield on occluded-30). The
+        // phantom at the shadow's edge passes before the ego gets there,
+        // but the car 10 m behind it, unseen, does not.
+        let (mut env, edge) = shadowed();
+        assert!(!env.scenario().spec().traffic_reacts);
+        let near = lane_in(&env, 0);
         assert!((near - edge - 8.5).abs() < 1.0, "{}", near - edge);
         env.place_car(0, edge - 10.0, 20.0).unwrap();
         let (cars, threat) = verdict(&env);
@@ -1181,16 +1189,7 @@ mod tests {
     #[test]
     fn seeing_through_walls_senses_the_hidden_car_and_no_phantom_at_the_shadow() {
         // The wall and the hidden car of the test above.
-        let mut env = empty("occluded");
-        let wall = OrientedRect::new(Vec2::new(-26.0, -4.0), 0.0, 40.0, 1.0);
-        env.set_occluders(&[wall]);
-        env.set_ego(env.scenario().spec().ego.stop_line_s, 0.0, false);
-        let edge = verdict(&env)
-            .0
-            .iter()
-            .find(|c| c.phantom && c.lane == 0)
-            .expect("a phantom where the wall's shadow starts")
-            .s;
+        let (mut env, edge) = shadowed();
         env.place_car(0, edge - 10.0, 20.0).unwrap();
         let p = ShieldParams::parse("see_through=1").unwrap();
         assert!(p.see_through);

@@ -22,6 +22,9 @@ use crate::seed::episode_seed;
 /// its first collision, and the oracle at its first fork that fails).
 /// The forks' seeds come from the environment's policy generator, so an
 /// episode's decisions depend only on its seed.
+/// Why the oracle needs a final *go*.
+const WHY: &str = "it tries a final go";
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct OraclePolicy {
     futures: u32,
@@ -54,16 +57,7 @@ impl Policy for OraclePolicy {
     }
 
     fn supports(&self, set: ActionSet) -> Result<(), SimError> {
-        if set.absorbing_go().is_none() {
-            return Err(SimError::Unsupported {
-                policy: format!(
-                    "{} (it tries a final go: ttg or creep actions)",
-                    self.name()
-                ),
-                set: set.name(),
-            });
-        }
-        Ok(())
+        set.final_go_for(&self.name(), WHY).map(|_| ())
     }
 
     fn act(
@@ -74,10 +68,7 @@ impl Policy for OraclePolicy {
     ) -> Result<(), SimError> {
         for ((env, rng), a) in envs.iter().zip(rngs.iter_mut()).zip(actions.iter_mut()) {
             let set = env.config().action_set;
-            let go = set.absorbing_go().ok_or_else(|| SimError::Unsupported {
-                policy: self.name(),
-                set: set.name(),
-            })?;
+            let go = set.final_go_for(&self.name(), WHY)?;
             *a = if env.ego().committed || self.go_is_safe(env, go, rng)? {
                 go
             } else {

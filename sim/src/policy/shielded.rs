@@ -128,16 +128,8 @@ impl Policy for ShieldedPolicy {
 
     fn supports(&self, set: ActionSet) -> Result<(), SimError> {
         self.inner.supports(set)?;
-        if set.absorbing_go().is_none() {
-            return Err(SimError::Unsupported {
-                policy: format!(
-                    "{} (the shield checks a final go: ttg or creep actions)",
-                    self.name()
-                ),
-                set: set.name(),
-            });
-        }
-        Ok(())
+        set.final_go_for(&self.name(), "the shield checks a final go")
+            .map(|_| ())
     }
 
     fn act(
