@@ -22,7 +22,7 @@ use crossroads_sim::{
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;
 use crossroads_types::codec::ObservationEncoding;
-use rand::SeedableRng;
+use rand::{RngExt, SeedableRng};
 
 use crate::error::ActorError;
 use crate::exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode};
@@ -70,6 +70,47 @@ pub struct ActorSettings {
     pub demonstrations: Option<Demonstrations>,
     /// The shield every environment acts through (`actor.shield`).
     pub shield: Option<ActorShield>,
+    /// Counterfactual *go* labels (`actor.go_forks`); `None` when off or
+    /// evaluating.
+    pub go_forks: Option<GoForks>,
+}
+
+/// Counterfactual *go* labels (`actor.go_forks`): at a training decision
+/// that is not a *go*, with probability `share`, a fork of the environment
+/// runs the final *go* to its end, and that *go* is stored from the
+/// decision's observation with the fork's return.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GoForks {
+    /// Probability per decision that is not a *go*.
+    pub share: f64,
+    /// The action set's final *go*.
+    pub go: usize,
+}
+
+impl GoForks {
+    /// From `actor.go_forks`; `None` when 0 or evaluating; an error naming
+    /// the key when the action set has no final *go*.
+    fn from_config(
+        config: &ActorConfig,
+        action_set: ActionSet,
+    ) -> Result<Option<Self>, ActorError> {
+        if config.eval || config.go_forks <= 0.0 {
+            return Ok(None);
+        }
+        if !(0.0..=1.0).contains(&config.go_forks) {
+            return Err(ActorError::Config(format!(
+                "actor.go_forks must be in [0, 1], got {}",
+                config.go_forks
+            )));
+        }
+        let go = action_set
+            .final_go_for("actor.go_forks", "it forks a final go")
+            .map_err(|e| ActorError::Config(format!("actor.go_forks: {e}")))?;
+        Ok(Some(Self {
+            share: config.go_forks,
+            go,
+        }))
+    }
 }
 
 /// The safety shield in the acting loop (`actor.shield`,
@@ -231,6 +272,7 @@ impl ActorSettings {
         };
         let demonstrations = Demonstrations::from_config(config, action_set)?;
         let shield = ActorShield::from_config(config, action_set)?;
+        let go_forks = GoForks::from_config(config, action_set)?;
         Ok(Self {
             scenario,
             action_set,
@@ -248,6 +290,7 @@ impl ActorSettings {
             pipeline: config.pipeline,
             demonstrations,
             shield,
+            go_forks,
         })
     }
 }
@@ -415,6 +458,10 @@ struct Lane {
     vetoed: Vec<Option<VetoedGo>>,
     /// *Go*s vetoed since the counter was last read.
     vetoes: u64,
+    /// Counterfactual *go* labels, with their random stream.
+    forks: Option<(GoForks, PolicyRng)>,
+    /// *Go*s run in forks since the counter was last read.
+    forked: u64,
 }
 
 /// A *go* the shield replaced, waiting for the executed step's outcome.
@@ -582,6 +629,9 @@ impl Actor {
             self.metrics
                 .shield_vetoes
                 .inc_by(std::mem::take(&mut lane.vetoes));
+            self.metrics
+                .go_forks
+                .inc_by(std::mem::take(&mut lane.forked));
             summary.transitions += lane.emitted.len() as u64;
             for t in lane.emitted.drain(..) {
                 self.builder.push(&t);
@@ -768,6 +818,13 @@ impl Lane {
             sensed: Vec::new(),
             vetoed: (0..m).map(|_| None).collect(),
             vetoes: 0,
+            forks: settings.go_forks.map(|f| {
+                (
+                    f,
+                    PolicyRng::seed_from_u64(episode_seed(settings.seed ^ 0xF02C, k)),
+                )
+            }),
+            forked: 0,
             envs,
         };
         if training {
@@ -823,6 +880,9 @@ impl Lane {
         }
         if self.shield.is_some() {
             self.shield_decisions(training);
+        }
+        if training && self.forks.is_some() {
+            self.fork_gos()?;
         }
         if cut {
             // n-step returns follow the greedy policy: a window ends
@@ -882,6 +942,50 @@ impl Lane {
                 });
             }
         }
+    }
+
+    /// Counterfactual *go* labels (`actor.go_forks`): where this decision
+    /// is not a *go*, now and then a fork of the environment runs the *go*
+    /// to its end, and the *go* is stored from the decision's observation
+    /// with the fork's return. The transition ends the episode (discount
+    /// 0), so its next observation is never read; the decision's own
+    /// stands in for it.
+    fn fork_gos(&mut self) -> Result<(), ActorError> {
+        let Some((forks, rng)) = self.forks.as_mut() else {
+            return Ok(());
+        };
+        let a = self.envs.num_actions();
+        let go = forks.go;
+        for i in 0..self.envs.len() {
+            if !rng.random_bool(forks.share) {
+                continue;
+            }
+            let env = self.envs.env(i).expect("a lane's environment");
+            if self.actions[i] == go || env.ego().committed || env.is_done() {
+                continue;
+            }
+            let Some(observation) = self.assemblers[i].current_observation().cloned() else {
+                continue;
+            };
+            let mut fork = env.fork(rng.random());
+            let end = fork.step(go)?;
+            let reward = end.reward as f32;
+            let td = (reward - self.q[i * a + go]).abs();
+            self.emitted.push(NStepTransition {
+                observation: Arc::clone(&observation),
+                action: go as u32,
+                reward,
+                discount: 0.0,
+                priority: if td.is_finite() {
+                    td
+                } else {
+                    crate::nstep::FALLBACK_PRIORITY
+                },
+                next_observation: observation,
+            });
+            self.forked += 1;
+        }
+        Ok(())
     }
 
     /// Steps every environment with its chosen action (on the rayon pool).

@@ -41,8 +41,8 @@ mod weights;
 mod worker;
 
 pub use actor::{
-    Actor, ActorSettings, RunReport, StepSummary, actor_seed, hostname, resolve_index,
-    resolve_observation,
+    Actor, ActorSettings, ActorShield, GoForks, RunReport, StepSummary, actor_seed, hostname,
+    resolve_index, resolve_observation,
 };
 pub use buffer::PushBuffer;
 pub use error::ActorError;

@@ -9,6 +9,7 @@
 //! | `crossroads_actor_episode_brake_seconds` | histogram | scenario, mode | braking time of traffic per episode |
 //! | `crossroads_actor_transitions_assembled_total` | counter | | n-step transitions assembled |
 //! | `crossroads_actor_shield_vetoes_total` | counter | | *go*s the shield in the loop vetoed (`actor.shield`) |
+//! | `crossroads_actor_go_forks_total` | counter | | counterfactual *go*s run in forks and stored (`actor.go_forks`) |
 //! | `crossroads_actor_transitions_pushed_total` | counter | transport | transitions the replay acknowledged |
 //! | `crossroads_actor_transitions_dropped_total` | counter | reason | `buffer_full` (oldest dropped while the replay was unreachable) or `rejected` (refused by the replay) |
 //! | `crossroads_actor_push_buffer_batches` | gauge | | batches waiting to be sent |
@@ -41,6 +42,8 @@ pub struct ActorMetrics {
     pub transitions_assembled: IntCounter,
     /// *Go*s the shield in the loop vetoed (`actor.shield`).
     pub shield_vetoes: IntCounter,
+    /// Counterfactual *go*s run in forks and stored (`actor.go_forks`).
+    pub go_forks: IntCounter,
     pushed: IntCounterVec,
     dropped: IntCounterVec,
     /// Batches waiting to be sent.
@@ -105,6 +108,10 @@ impl ActorMetrics {
             "crossroads_actor_shield_vetoes_total",
             "Go decisions the shield in the loop (actor.shield) vetoed and replaced",
         )?;
+        let go_forks = IntCounter::new(
+            "crossroads_actor_go_forks_total",
+            "Counterfactual go decisions run in forks of the environment and stored (actor.go_forks)",
+        )?;
         let pushed = counter_vec(
             "crossroads_actor_transitions_pushed_total",
             "Transitions acknowledged by the replay server",
@@ -167,6 +174,7 @@ impl ActorMetrics {
             r.register(Box::new(episode_brake.clone()))?;
             r.register(Box::new(transitions_assembled.clone()))?;
             r.register(Box::new(shield_vetoes.clone()))?;
+            r.register(Box::new(go_forks.clone()))?;
             r.register(Box::new(pushed.clone()))?;
             r.register(Box::new(dropped.clone()))?;
             r.register(Box::new(buffer_batches.clone()))?;
@@ -189,6 +197,7 @@ impl ActorMetrics {
             episode_brake,
             transitions_assembled,
             shield_vetoes,
+            go_forks,
             pushed,
             dropped,
             buffer_batches,

@@ -115,6 +115,17 @@ pub struct ActorConfig {
     /// What a vetoed *go* costs in its stored transition, in the reward's
     /// units (a success is worth 1). At least 0.
     pub veto_cost: f64,
+    /// Counterfactual *go* labels: at each training decision that is not a
+    /// *go*, with this probability the environment is forked (the same
+    /// present, hidden cars included, another future) and a *go* run to
+    /// its end in the fork; that *go*, from the decision's observation, is
+    /// stored as a transition of its own with the fork's return (a *go*
+    /// ends the episode, so nothing is bootstrapped). Q(go) then learns
+    /// from outcomes where the policy rarely goes: the shortage that makes
+    /// a creep network undervalue safe *go*s and go where the present has
+    /// already decided a collision (reports/occlusion-ladder). TTG and
+    /// Creep-and-Go actions only. 0: none. In [0, 1].
+    pub go_forks: f64,
     /// Greedy evaluation: no exploration, no transitions pushed; episodes
     /// are reported to the metrics (and the log: each at debug level,
     /// outcome rates every 30 s at info).
@@ -155,6 +166,7 @@ impl Default for ActorConfig {
             demo_policy: None,
             shield: None,
             veto_cost: 0.0,
+            go_forks: 0.0,
             eval: false,
             transport: ActorTransport::Grpc,
             weights: None,
@@ -216,6 +228,11 @@ impl ActorConfig {
             self.veto_cost.is_finite() && self.veto_cost >= 0.0,
             "veto_cost",
             format!("must be finite and at least 0, got {}", self.veto_cost),
+        );
+        problems.check(
+            (0.0..=1.0).contains(&self.go_forks),
+            "go_forks",
+            format!("must be in [0, 1], got {}", self.go_forks),
         );
         if self.early_demo_envs > 0 {
             problems.check(

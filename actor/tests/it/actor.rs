@@ -504,6 +504,91 @@ fn a_shield_in_the_loop_replaces_vetoed_gos_and_stores_them_with_their_cost() {
     }
 }
 
+/// `actor.go_forks`: a network that never goes still has its Q(go)
+/// labelled. Every decision forks its environment, runs the *go* to its
+/// end there and stores it from the decision's observation with the fork's
+/// return, ending the episode (discount 0): successes and collisions both,
+/// each counted. Without forks the same network stores no *go*.
+#[test]
+fn go_forks_label_the_go_a_waiting_network_never_takes() {
+    let run = |share: f64| {
+        let mut config = actor_config(4, 64);
+        config.epsilon_base = 0.0;
+        config.go_forks = share;
+        let (mut a, mut values) = actor(&config, 0);
+        // Wait (action 1) first everywhere: the network never goes.
+        values.bias = vec![0.0, 1.0, 0.0, 0.0, 0.0];
+        values.scale = vec![0.0; 5];
+        let mut gos = Vec::new();
+        let mut decisions = 0;
+        for _ in 0..300 {
+            decisions += a.step(&mut values).expect("step").decisions;
+            while let Some(b) = a.take_batch() {
+                let c = &b.columns;
+                for k in 0..c.actions.len() {
+                    if c.actions[k] == 0 {
+                        gos.push((c.rewards[k], c.discounts[k], c.priorities[k]));
+                    }
+                }
+            }
+        }
+        (gos, a.metrics().go_forks.get(), decisions)
+    };
+    let (gos, forked, _) = run(0.0);
+    assert_eq!((gos.len(), forked), (0, 0));
+
+    let (gos, forked, decisions) = run(1.0);
+    eprintln!(
+        "{} forked gos stored of {forked} run in {decisions} decisions",
+        gos.len()
+    );
+    // A decision forks before its step: the last one's forks are run, its
+    // step not yet taken (up to one per environment).
+    assert!(
+        forked > 0 && forked <= decisions + 4,
+        "{forked} > {decisions} + 4"
+    );
+    // Stored in batches of 64: all but the last partial batch.
+    assert!(gos.len() as u64 <= forked && gos.len() as u64 + 64 > forked);
+    let successes = gos.iter().filter(|(r, _, _)| *r > 0.0).count();
+    let collisions = gos.iter().filter(|(r, _, _)| *r < -1.0).count();
+    assert!(
+        successes > 0 && collisions > 0,
+        "{successes} successes, {collisions} collisions"
+    );
+    for (reward, discount, priority) in gos {
+        assert_eq!(discount, 0.0);
+        // |return - Q(go)| with Q(go) = 0.
+        assert!(
+            (priority - reward.abs()).abs() < 1e-5,
+            "{reward} {priority}"
+        );
+    }
+}
+
+#[test]
+fn go_forks_that_cannot_fork_are_refused_by_name() {
+    let mut config = actor_config(4, 64);
+    config.go_forks = 0.1;
+    let sequential = SimConfig {
+        action_set: "sequential".to_owned(),
+        ..SimConfig::default()
+    };
+    let e = ActorSettings::from_config(&sequential, &config, 0)
+        .expect_err("sequential")
+        .to_string();
+    assert!(
+        e.contains("actor.go_forks") && e.contains("sequential"),
+        "{e}"
+    );
+    config.go_forks = 1.5;
+    let problems = config.validate();
+    assert!(
+        problems.iter().any(|(key, _)| key == "actor.go_forks"),
+        "{problems:?}"
+    );
+}
+
 #[test]
 fn a_shield_that_cannot_check_is_refused_by_name() {
     let mut config = actor_config(4, 64);
