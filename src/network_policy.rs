@@ -154,16 +154,17 @@ impl NetworkPolicy {
     }
 
     /// Checks that the network reads what `env` observes; an error names
-    /// both shapes.
+    /// both layouts.
     pub fn fits(&self, env: &Env) -> anyhow::Result<()> {
-        let spec = &self.spec;
-        let len = env.obs_spec().len();
+        let ours = &self.spec.observation;
+        let given = env.obs_spec().layout();
         anyhow::ensure!(
-            spec.input_len() as usize == len,
-            "the network reads {} observations of {} values; scenario {} with these actions gives {len}",
-            spec.observation.kind,
-            spec.input_len(),
+            &given == ours,
+            "the network reads {} observations ({ours}, {} values); scenario {} with these actions gives {given} ({} values)",
+            ours.kind,
+            ours.len(),
             env.scenario().name(),
+            given.len(),
         );
         Ok(())
     }
@@ -275,8 +276,12 @@ mod tests {
 
     use super::*;
 
+    fn ttg() -> crossroads_model::ObservationLayout {
+        crossroads_sim::observation_layout("ttg").expect("a view")
+    }
+
     fn weights(seed: u64) -> Vec<u8> {
-        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8, 8]).expect("spec");
+        let spec = NetworkSpec::new(ttg(), "ttg", TrunkKind::Mlp, vec![8, 8]).expect("spec");
         QNetwork::new(spec, seed)
             .and_then(|n| n.to_safetensors(seed))
             .expect("network")
@@ -319,7 +324,7 @@ mod tests {
 
     #[test]
     fn an_ensemble_of_different_networks_is_refused_naming_the_member() {
-        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8, 4]).expect("spec");
+        let spec = NetworkSpec::new(ttg(), "ttg", TrunkKind::Mlp, vec![8, 4]).expect("spec");
         let other = QNetwork::new(spec, 3)
             .and_then(|n| n.to_safetensors(1))
             .expect("network");

@@ -223,18 +223,25 @@ fn load_sim(sim: &SimConfig) -> Result<(Arc<Scenario>, ActionSet), ActorError> {
     Ok((scenario, action_set))
 }
 
-/// Fills `sim.observation` with the observation actors of `[sim]`'s
-/// scenario and action set produce (the paper's pairing: the Sequential
-/// grid for Sequential actions, the TTG grid otherwise, occlusion channels
-/// when the scenario has occluders), or checks that the one given is that.
-/// Every role resolves it at start, so the learner's network reads what the
-/// actors send.
+/// Fills `sim.observation` and its layout with the observation actors of
+/// `[sim]`'s scenario and action set produce (the paper's pairing: the
+/// Sequential grid for Sequential actions, the TTG grid otherwise,
+/// occlusion channels when the scenario has occluders), or checks that the
+/// one given is a view of the simulator and that one. Every role resolves
+/// it at start, so the learner's network reads what the actors send; the
+/// layout comes from the simulator (no environment is built).
 pub fn resolve_observation(sim: &mut SimConfig) -> Result<(), ActorError> {
+    if let Some(given) = sim.observation()
+        && let Err(e) = crossroads_sim::observation_layout(given)
+    {
+        return Err(ActorError::Config(format!("sim.observation: {e}")));
+    }
     let (scenario, action_set) = load_sim(sim)?;
-    let env = crossroads_sim::Env::new(scenario, EnvConfig::for_actions(action_set));
-    let produced = crate::batch_spec(env.obs_spec()).kind;
-    sim.resolve_observation(&produced)
-        .map_err(ActorError::Config)
+    let produced = EnvConfig::for_actions(action_set)
+        .observation
+        .spec(scenario.occlusion_channels())
+        .layout();
+    sim.resolve_layout(produced).map_err(ActorError::Config)
 }
 
 impl ActorSettings {
@@ -507,7 +514,7 @@ impl Actor {
             .collect::<Result<Vec<_>, _>>()?;
         let lane = &lanes[0].envs;
         let builder = BatchBuilder::new(
-            lane.batch_spec(),
+            lane.layout(),
             lane.num_actions() as u32,
             ObservationEncoding::SparseF32,
         );
@@ -559,7 +566,7 @@ impl Actor {
                 values.obs_len(),
                 values.num_actions(),
                 obs_len,
-                self.lanes[0].envs.batch_spec(),
+                self.lanes[0].envs.layout(),
                 a,
                 self.settings.action_set
             )));

@@ -55,5 +55,5 @@ pub use process::{ActorParts, DRAIN, RunningActor, run, start, start_with_max_st
 pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};
-pub use vec_env::{EnvStep, EpisodeEnd, VecEnv, batch_spec};
+pub use vec_env::{EnvStep, EpisodeEnd, VecEnv};
 pub use weights::{LiveNetwork, WeightsSubscription};

@@ -29,7 +29,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use crossroads_types::codec::ObservationEncoding;
-use crossroads_types::{ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{ObservationLayout, Transition, TransitionBatch};
 
 use crate::values::max_value;
 
@@ -212,7 +212,7 @@ impl NStepAssembler {
 /// in its pool however many transitions refer to it.
 #[derive(Debug, Clone)]
 pub struct BatchBuilder {
-    spec: ObservationSpec,
+    layout: ObservationLayout,
     num_actions: u32,
     encoding: ObservationEncoding,
     batch: TransitionBatch,
@@ -220,12 +220,12 @@ pub struct BatchBuilder {
 }
 
 impl BatchBuilder {
-    /// An empty builder of batches of `spec` observations (encoded with
-    /// `encoding`) and `num_actions` actions.
-    pub fn new(spec: ObservationSpec, num_actions: u32, encoding: ObservationEncoding) -> Self {
+    /// An empty builder of batches of observations of `layout` (encoded
+    /// with `encoding`) and `num_actions` actions.
+    pub fn new(layout: ObservationLayout, num_actions: u32, encoding: ObservationEncoding) -> Self {
         Self {
-            batch: TransitionBatch::new(spec.clone(), num_actions, encoding),
-            spec,
+            batch: TransitionBatch::new(layout.clone(), num_actions, encoding),
+            layout,
             num_actions,
             encoding,
             pool: HashMap::new(),
@@ -261,7 +261,7 @@ impl BatchBuilder {
         self.pool.clear();
         std::mem::replace(
             &mut self.batch,
-            TransitionBatch::new(self.spec.clone(), self.num_actions, self.encoding),
+            TransitionBatch::new(self.layout.clone(), self.num_actions, self.encoding),
         )
     }
 

@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use crossroads_sim::{Env, EnvConfig, ObsSpec, Outcome, Scenario, episode_seed};
-use crossroads_types::ObservationSpec;
+use crossroads_types::ObservationLayout;
 use crossroads_types::codec::{self, ObservationEncoding};
 use rayon::prelude::*;
 
@@ -164,11 +164,11 @@ impl VecEnv {
         self.spec
     }
 
-    /// The observation spec transitions carry: kind `ttg`, `ttg-occlusion`,
-    /// `sequential` or `sequential-occlusion` (the model's names), flat
-    /// shape `[obs_len]` (channel-major grid, then the ego features).
-    pub fn batch_spec(&self) -> ObservationSpec {
-        batch_spec(self.spec)
+    /// The observation layout transitions carry ([`ObsSpec::layout`]:
+    /// kind `ttg`, `ttg-occlusion`, `sequential` or `sequential-occlusion`,
+    /// the channel-major grid, then the ego features).
+    pub fn layout(&self) -> ObservationLayout {
+        self.spec.layout()
     }
 
     /// Size of the action set.
@@ -317,15 +317,4 @@ impl Slot {
             episode,
         })
     }
-}
-
-/// The batch spec of a simulator observation shape (see
-/// [`VecEnv::batch_spec`]).
-pub fn batch_spec(spec: ObsSpec) -> ObservationSpec {
-    let kind = if spec.occlusion {
-        format!("{}-occlusion", spec.kind.name())
-    } else {
-        spec.kind.name().to_owned()
-    };
-    ObservationSpec::new(kind, [spec.len() as u32])
 }

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crossroads_types::spec::ObservationLayout;
+use crossroads_types::ObservationLayout;
 
 use super::{ACTION_SETS, Checks};
 
@@ -33,6 +33,13 @@ pub struct SimConfig {
     /// occluders). Set, it must be that pairing: the actors produce it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub observation: Option<String>,
+    /// The layout of `observation`, as the simulator gives it: filled when
+    /// a role resolves the observation at start, never read from a file,
+    /// so that roles which do not link the simulator (the learner) build
+    /// their network from it.
+    #[serde(skip)]
+    #[schemars(skip)]
+    layout: Option<ObservationLayout>,
 }
 
 impl Default for SimConfig {
@@ -42,32 +49,41 @@ impl Default for SimConfig {
             action_set: "ttg".to_owned(),
             drivers: None,
             observation: None,
+            layout: None,
         }
     }
 }
 
 impl SimConfig {
-    /// Fills `observation` with `produced`, the observation the actors of
-    /// this scenario and action set produce, or checks that the one given
-    /// is that.
-    pub fn resolve_observation(&mut self, produced: &str) -> Result<(), String> {
+    /// Fills `observation` and its layout with `produced`, the layout the
+    /// actors of this scenario and action set produce, or checks that the
+    /// observation given is that one (by name).
+    pub fn resolve_layout(&mut self, produced: ObservationLayout) -> Result<(), String> {
         match &self.observation {
-            Some(given) if given != produced => Err(format!(
+            Some(given) if *given != produced.kind => Err(format!(
                 "sim.observation = {given:?}, but scenario {:?} with {:?} actions produces \
-                 {produced:?}; remove sim.observation (it is derived) or change the scenario \
+                 {:?}; remove sim.observation (it is derived) or change the scenario \
                  or the action set",
-                self.scenario, self.action_set
+                self.scenario, self.action_set, produced.kind
             )),
             _ => {
-                self.observation = Some(produced.to_owned());
+                self.observation = Some(produced.kind.clone());
+                self.layout = Some(produced);
                 Ok(())
             }
         }
     }
 
-    /// The observation, once resolved (see [`Self::resolve_observation`]).
+    /// The observation's name, once given or resolved (see
+    /// [`Self::resolve_layout`]).
     pub fn observation(&self) -> Option<&str> {
         self.observation.as_deref()
+    }
+
+    /// The observation's layout, once resolved (see
+    /// [`Self::resolve_layout`]).
+    pub fn layout(&self) -> Option<&ObservationLayout> {
+        self.layout.as_ref()
     }
 
     /// Range checks, each with its dotted key.
@@ -79,9 +95,8 @@ impl SimConfig {
             "must name a scenario".to_owned(),
         );
         problems.one_of("action_set", &self.action_set, &ACTION_SETS);
-        if let Some(observation) = &self.observation {
-            problems.one_of("observation", observation, &ObservationLayout::KINDS);
-        }
+        // `observation` names a view of the simulator, which this crate does
+        // not link: resolving it checks the name (crossroads_actor::resolve_observation).
         problems.into_vec()
     }
 }

@@ -20,7 +20,7 @@ fn used(h: &BatchFrameHeader) -> impl PartialEq + std::fmt::Debug {
         (h.magic, h.version, h.batch_id),
         (h.num_transitions, h.num_observations, h.num_actions),
         (h.encoding, h.data_len),
-        h.shape[..h.rank as usize].to_vec(),
+        (h.channels, h.rows, h.cols, h.extra_features),
         h.kind[..h.kind_len as usize].to_vec(),
         h.table[..h.table_len as usize].to_vec(),
     )

@@ -5,7 +5,7 @@
 //! Asserts: a batch that converts is a `ValidBatch` whose every invariant
 //! holds (equal columns, actions below `num_actions`, finite rewards,
 //! discounts in [0, 1], finite non-negative priorities, indices into the
-//! pool, every pool entry decoding to the spec's length), converts back to
+//! pool, every pool entry decoding to the layout's length), converts back to
 //! the very message it came from, and survives encode -> decode ->
 //! convert unchanged; a refused one names its field. A sample that
 //! converts has one key and weight per transition.
@@ -37,7 +37,7 @@ fn check_invariants(b: &ValidBatch) {
     let pool = &b.observations;
     let indices = c.observation_index.iter().chain(&c.next_observation_index);
     assert!(indices.into_iter().all(|i| (*i as usize) < pool.len()));
-    let len = b.spec.num_values().expect("a valid spec has a length");
+    let len = b.layout.check().expect("a valid layout has a length");
     let mut out = vec![0.0; len];
     for i in 0..pool.len() {
         pool.decode_into(i, &mut out).expect("every entry decodes");

@@ -6,9 +6,9 @@
 
 use std::collections::HashMap;
 
-use crossroads_transport::shm::{BatchFrameHeader, MAX_KIND, MAX_RANK, MAX_TABLE};
+use crossroads_transport::shm::{BatchFrameHeader, MAX_KIND, MAX_TABLE};
 use crossroads_transport::weights_shm::WeightsFrameHeader;
-use crossroads_types::{F32Tensor, NetworkSpec, TrunkKind, WeightsMeta};
+use crossroads_types::{F32Tensor, NetworkSpec, ObservationLayout, TrunkKind, WeightsMeta};
 
 pub mod seeds;
 
@@ -64,7 +64,7 @@ impl Words<'_> {
 }
 
 /// Bytes of a [`BatchFrameHeader`] in [`batch_header_to_bytes`]' order.
-pub const BATCH_HEADER_BYTES: usize = 4 * 8 + 8 + 4 * MAX_RANK + 4 + MAX_KIND + 4 + MAX_TABLE;
+pub const BATCH_HEADER_BYTES: usize = 4 * 11 + 8 + 4 + MAX_KIND + 4 + MAX_TABLE;
 
 /// A batch frame header from its field-by-field bytes, and the rest.
 pub fn batch_header_from_bytes(data: &[u8]) -> (BatchFrameHeader, &[u8]) {
@@ -79,10 +79,12 @@ pub fn batch_header_from_bytes(data: &[u8]) -> (BatchFrameHeader, &[u8]) {
         num_actions: w.u32(),
         encoding: w.u32(),
         data_len: w.u32(),
-        rank: w.u32(),
+        channels: w.u32(),
+        rows: w.u32(),
+        cols: w.u32(),
+        extra_features: w.u32(),
         ..BatchFrameHeader::default()
     };
-    h.shape.iter_mut().for_each(|d| *d = w.u32());
     h.kind_len = w.u32();
     h.kind = w.take();
     h.table_len = w.u32();
@@ -103,13 +105,13 @@ pub fn batch_header_to_bytes(h: &BatchFrameHeader) -> Vec<u8> {
         h.num_actions,
         h.encoding,
         h.data_len,
-        h.rank,
+        h.channels,
+        h.rows,
+        h.cols,
+        h.extra_features,
     ] {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    h.shape
-        .iter()
-        .for_each(|d| out.extend_from_slice(&d.to_le_bytes()));
     out.extend_from_slice(&h.kind_len.to_le_bytes());
     out.extend_from_slice(&h.kind);
     out.extend_from_slice(&h.table_len.to_le_bytes());
@@ -147,7 +149,13 @@ pub fn weights_header_to_bytes(h: &WeightsFrameHeader) -> Vec<u8> {
 
 /// A small valid network spec.
 pub fn small_spec() -> NetworkSpec {
-    NetworkSpec::new("sequential", "creep", TrunkKind::Mlp, vec![4]).expect("a valid spec")
+    NetworkSpec::new(
+        ObservationLayout::new("toy", 2, 3, 4, 1),
+        "creep",
+        TrunkKind::Mlp,
+        vec![4],
+    )
+    .expect("a valid spec")
 }
 
 /// A safetensors weights file of `spec` at `version`: one small tensor

@@ -13,7 +13,7 @@ use crossroads_types::checkpoint::{
 };
 use crossroads_types::codec::{self, ObservationEncoding};
 use crossroads_types::{
-    NetworkSpec, ObservationSpec, Sample, Transition, TransitionBatch, TrunkKind, ValidBatch,
+    NetworkSpec, ObservationLayout, Sample, Transition, TransitionBatch, TrunkKind, ValidBatch,
     Weights,
 };
 use prost::Message;
@@ -26,9 +26,9 @@ use crate::{
 /// One seed: target, file name, bytes.
 pub type Seed = (&'static str, String, Vec<u8>);
 
-fn batch(encoding: ObservationEncoding, shape: &[u32], transitions: u32) -> ValidBatch {
-    let len: u32 = shape.iter().product();
-    let mut b = TransitionBatch::new(ObservationSpec::new("toy", shape), 3, encoding);
+fn batch(encoding: ObservationEncoding, layout: ObservationLayout, transitions: u32) -> ValidBatch {
+    let len = layout.check().expect("a valid layout") as u32;
+    let mut b = TransitionBatch::new(layout, 3, encoding);
     let observations: Vec<u32> = (0..3)
         .map(|k| {
             let values: Vec<f32> = (0..len)
@@ -59,11 +59,19 @@ fn batch(encoding: ObservationEncoding, shape: &[u32], transitions: u32) -> Vali
 /// A small valid dense batch (also what the snapshot target's tables hold
 /// before a restore).
 pub fn dense_batch() -> ValidBatch {
-    batch(ObservationEncoding::DenseF32, &[2, 3], 4)
+    batch(
+        ObservationEncoding::DenseF32,
+        ObservationLayout::new("toy", 1, 2, 3, 0),
+        4,
+    )
 }
 
 fn sparse_batch() -> ValidBatch {
-    batch(ObservationEncoding::SparseF32, &[4, 5, 3], 5)
+    batch(
+        ObservationEncoding::SparseF32,
+        ObservationLayout::new("toy", 4, 5, 3, 2),
+        5,
+    )
 }
 
 fn wire_batch() -> Vec<Seed> {
@@ -86,9 +94,20 @@ fn wire_batch() -> Vec<Seed> {
 fn specs() -> Vec<NetworkSpec> {
     vec![
         small_spec(),
-        NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![8, 16, 32]).expect("spec"),
-        NetworkSpec::new("ttg-occlusion", "sequential", TrunkKind::Mlp, vec![64, 64])
-            .expect("spec"),
+        NetworkSpec::new(
+            ObservationLayout::new("large", 5, 18, 26, 4),
+            "ttg",
+            TrunkKind::Conv,
+            vec![8, 16, 32],
+        )
+        .expect("spec"),
+        NetworkSpec::new(
+            ObservationLayout::new("large-occluded", 6, 18, 26, 4),
+            "sequential",
+            TrunkKind::Mlp,
+            vec![64, 64],
+        )
+        .expect("spec"),
     ]
 }
 

@@ -16,11 +16,9 @@ fn updates(c: &mut Criterion) {
             batch_size: batch,
             ..LearnerConfig::default()
         };
-        let sim = SimConfig {
-            drivers: None,
-            observation: Some("ttg".to_owned()),
-            ..SimConfig::default()
-        };
+        let mut sim = SimConfig::default();
+        sim.resolve_layout(crossroads_sim::observation_layout("ttg").expect("a view"))
+            .expect("the default action set's view");
         let tc = TrainerConfig::from_config(&sim, &config).expect("default config is valid");
         let mut rng = SplitMix::new(1);
         let batches: Vec<TrainingBatch> = (0..4)

@@ -48,7 +48,7 @@ use crossroads_learner::optimizer::OptimizerConfig;
 use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
 use crossroads_model::{NetworkSpec, ObservationLayout, QNetwork, TrunkKind};
 use crossroads_replay::sum_tree::SumTree;
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{ObservationEncoding, Transition, TransitionBatch};
 use tch::{Kind, Tensor};
 
 const WAIT: usize = 0;
@@ -579,11 +579,8 @@ fn run(o: &Options, seed: u64) {
         {
             let beta = 0.4 + 0.6 * updates as f64 / o.updates as f64;
             let (slots, weights) = replay.sample(o.batch, beta, &mut rng);
-            let mut b = TransitionBatch::new(
-                ObservationSpec::new("toy", [spec.input_len() as u32]),
-                3,
-                ObservationEncoding::DenseF32,
-            );
+            let mut b =
+                TransitionBatch::new(spec.observation.clone(), 3, ObservationEncoding::DenseF32);
             for &slot in &slots {
                 let item = replay.items[slot].as_ref().expect("sampled item");
                 let s = b.push_observation(&item.obs);

@@ -1,14 +1,14 @@
 //! [`TrainingBatch`]: a sampled batch as the tensors an update needs,
 //! checked against the network at the boundary.
 //!
-//! Checked here: the observation kind, its length and the action count
-//! against the network's spec, and the importance weights. An MLP's batches
+//! Checked here: the observation layout and the action count against the
+//! network's spec, and the importance weights. An MLP's batches
 //! go from the replay's sparse entries straight into sparse rows
 //! (`crossroads_model::Observations::from_encoded`), with no dense rows in
 //! between. The tensors are built on the CPU; a trainer on another device
 //! moves them there ([`TrainingBatch::to_device`]).
 
-use crossroads_model::{NetworkSpec, Observations};
+use crossroads_model::{NetworkSpec, ObservationLayout, Observations};
 use crossroads_types::{Sample, TransitionBatch};
 use tch::{Device, Tensor};
 
@@ -115,21 +115,20 @@ impl TrainingBatch {
                 keys.len()
             )));
         }
-        let input = spec.input_len() as usize;
-        let values = batch.spec.num_values();
-        if values != Some(input) {
+        // A table restored from a file of an earlier build holds a legacy
+        // layout (kind and length only) until its next insert.
+        if !batch.layout.reads_as(&spec.observation) {
+            let values = |l: &ObservationLayout| {
+                l.check()
+                    .map_or_else(|_| "invalid".to_owned(), |v| v.to_string())
+            };
             return Err(LearnerError::Batch(format!(
-                "observations are {} ({} values), the network reads {} ({input} values); \
+                "observations are {} ({} values), the network reads {} ({} values); \
                  sim.observation must match what the actors send",
-                batch.spec,
-                values.map_or_else(|| "invalid".to_owned(), |v| v.to_string()),
-                spec.observation.kind,
-            )));
-        }
-        if batch.spec.kind != spec.observation.kind {
-            return Err(LearnerError::Batch(format!(
-                "observation kind is {:?}, the network reads {:?}",
-                batch.spec.kind, spec.observation.kind
+                batch.layout,
+                values(&batch.layout),
+                spec.observation,
+                values(&spec.observation),
             )));
         }
         if i64::from(batch.num_actions) != spec.num_actions {

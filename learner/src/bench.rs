@@ -9,7 +9,7 @@ use crossroads_common::Shutdown;
 use crossroads_config::{Config, LearnerConfig, PrecisionSetting, SimConfig};
 use crossroads_model::{NetworkSpec, Precision, Work};
 use crossroads_transport::grpc::ReplayClient;
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{ObservationEncoding, Transition, TransitionBatch};
 use tch::Device;
 
 use crate::LearnerError;
@@ -75,12 +75,8 @@ pub fn synthetic_observation(spec: &NetworkSpec, rng: &mut SplitMix) -> Vec<f32>
 /// following transition's state; episodes end with probability 1/50),
 /// k-step discounts 0.99^k for k in {1, 2, 4, 8}, sparse observations.
 pub fn synthetic_batch(spec: &NetworkSpec, n: usize, rng: &mut SplitMix) -> TransitionBatch {
-    let o = &spec.observation;
     let mut b = TransitionBatch::new(
-        ObservationSpec::new(
-            o.kind.clone(),
-            [o.len() as u32], // flat: channel-major grid, then ego features
-        ),
+        spec.observation.clone(),
         spec.num_actions as u32,
         ObservationEncoding::SparseF32,
     );

@@ -5,21 +5,21 @@ use crossroads_config::{LearnerConfig, SimConfig};
 use crate::ModelError;
 use crate::spec::NetworkSpec;
 
-/// The network `[sim]` (observation, action set) and `[learner]` (trunk,
-/// hidden sizes) describe: the learner trains it and actors start from it,
-/// built with `learner.seed`. `sim.observation` must be resolved (every
+/// The network `[sim]` (observation layout, action set) and `[learner]`
+/// (trunk, hidden sizes) describe: the learner trains it and actors start
+/// from it, built with `learner.seed`. The layout must be resolved (every
 /// role does at start, `crossroads_actor::resolve_observation`).
 pub fn network_spec(sim: &SimConfig, c: &LearnerConfig) -> Result<NetworkSpec, ModelError> {
-    let observation = sim.observation().ok_or_else(|| {
+    let layout = sim.layout().ok_or_else(|| {
         ModelError::Spec(
-            "sim.observation is unset: a role derives it from sim.scenario and \
-             sim.action_set at start (crossroads_actor::resolve_observation)"
+            "the layout of sim.observation is unresolved: a role derives it from \
+             sim.scenario and sim.action_set at start (crossroads_actor::resolve_observation)"
                 .to_owned(),
         )
     })?;
     let hidden = c.hidden.iter().map(|&h| i64::from(h)).collect();
     Ok(NetworkSpec::new(
-        observation,
+        layout.clone(),
         &sim.action_set,
         c.trunk,
         hidden,

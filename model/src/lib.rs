@@ -2,7 +2,8 @@
 //! the learner (training), and its weights format.
 //!
 //! A [`NetworkSpec`] says what a network is: the [`ObservationLayout`] it
-//! reads (the simulator's channel-major grid plus dense ego features), the
+//! reads (a channel-major grid plus dense features, as the simulator
+//! gives it; this crate knows no sizes of its own), the
 //! action set it scores and its trunk ([`TrunkKind::Mlp`] or
 //! [`TrunkKind::Conv`]); it and the weights metadata ([`WeightsMeta`]) are
 //! tch-free and live in `crossroads_types`, re-exported here. [`QNetwork`] builds it with value V(s) and
@@ -33,8 +34,7 @@ pub mod weights;
 
 pub use config::network_spec;
 pub use crossroads_types::spec::{
-    self as spec, EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind,
-    num_actions_of,
+    self as spec, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
 };
 pub use device::{CudaSupport, device_name, resolve_device};
 pub use error::ModelError;

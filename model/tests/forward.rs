@@ -19,6 +19,19 @@ fn set(net: &QNetwork, name: &str, values: &[f32], shape: &[i64]) {
     });
 }
 
+/// A grid of 5 x 18 x 26 and 4 dense values: a large, mostly empty input
+/// like the simulator's TTG view. The sizes are this test's own (the
+/// simulator's are in `crossroads_sim`): the model reads whatever layout
+/// it is given.
+fn large() -> ObservationLayout {
+    ObservationLayout::new("large", 5, 18, 26, 4)
+}
+
+/// A small grid of 6 x 5 x 11 and 4 dense values.
+fn small() -> ObservationLayout {
+    ObservationLayout::new("small", 6, 5, 11, 4)
+}
+
 /// An MLP over `inputs` plain values (no grid, no ego features).
 fn plain_mlp(inputs: i64, hidden: Vec<i64>, num_actions: i64) -> NetworkSpec {
     NetworkSpec {
@@ -95,6 +108,8 @@ mod qnetwork {
     use crossroads_model::{
         ModelError, NetworkSpec, ObservationLayout, QNetwork, TrunkKind, weights,
     };
+
+    use super::{large, small};
     use tch::{Kind, Tensor};
 
     /// Observations in [0, 1) from `seed`, without libtorch's global
@@ -113,16 +128,24 @@ mod qnetwork {
         Tensor::from_slice(&values).reshape([batch, spec.input_len()])
     }
 
+    /// Grids of several shapes (one odd, one without dense values) and
+    /// every action set, each with both trunks.
     fn specs() -> Vec<NetworkSpec> {
+        let layouts = [
+            large(),
+            ObservationLayout::new("large-occluded", 6, 18, 26, 4),
+            small(),
+            ObservationLayout::new("odd", 2, 3, 7, 0),
+        ];
         let mut out = Vec::new();
-        for kind in ObservationLayout::KINDS {
+        for layout in layouts {
             for actions in ["ttg", "sequential", "creep"] {
                 out.push(
-                    NetworkSpec::new(kind, actions, TrunkKind::Mlp, vec![32, 16])
+                    NetworkSpec::new(layout.clone(), actions, TrunkKind::Mlp, vec![32, 16])
                         .expect("test setup"),
                 );
                 out.push(
-                    NetworkSpec::new(kind, actions, TrunkKind::Conv, vec![4, 8, 16])
+                    NetworkSpec::new(layout.clone(), actions, TrunkKind::Conv, vec![4, 8, 16])
                         .expect("test setup"),
                 );
             }
@@ -131,7 +154,7 @@ mod qnetwork {
     }
 
     #[test]
-    fn every_observation_kind_and_action_set_has_a_network_of_each_trunk() {
+    fn every_layout_and_action_set_has_a_network_of_each_trunk() {
         for spec in specs() {
             let net = QNetwork::new(spec.clone(), 3).unwrap();
             let q = net.q_values(&obs(&spec, 5, 1)).unwrap();
@@ -158,7 +181,7 @@ mod qnetwork {
             } else {
                 vec![8, 8, 32]
             };
-            let spec = NetworkSpec::new("sequential", "sequential", trunk, hidden).unwrap();
+            let spec = NetworkSpec::new(small(), "sequential", trunk, hidden).unwrap();
             let net = QNetwork::new(spec.clone(), 9).unwrap();
             let x = obs(&spec, 7, 4);
             let q = net.q_values(&x).unwrap();
@@ -183,8 +206,14 @@ mod qnetwork {
     #[test]
     fn safetensors_round_trip_gives_bit_identical_q_values() {
         for spec in [
-            NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![64, 32]).unwrap(),
-            NetworkSpec::new("ttg-occlusion", "creep", TrunkKind::Conv, vec![8, 16, 32]).unwrap(),
+            NetworkSpec::new(large(), "ttg", TrunkKind::Mlp, vec![64, 32]).unwrap(),
+            NetworkSpec::new(
+                ObservationLayout::new("large-occluded", 6, 18, 26, 4),
+                "creep",
+                TrunkKind::Conv,
+                vec![8, 16, 32],
+            )
+            .unwrap(),
         ] {
             let net = QNetwork::new(spec.clone(), 5).unwrap();
             let bytes = net.to_safetensors(42).unwrap();
@@ -201,7 +230,7 @@ mod qnetwork {
 
     #[test]
     fn weights_carry_names_shapes_spec_and_version() {
-        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![256, 256]).unwrap();
+        let spec = NetworkSpec::new(large(), "ttg", TrunkKind::Mlp, vec![256, 256]).unwrap();
         let net = QNetwork::new(spec.clone(), 1).unwrap();
         let (meta, tensors) = weights::decode(&net.to_safetensors(7).unwrap()).unwrap();
         assert_eq!(meta["format"], weights::FORMAT);
@@ -226,12 +255,12 @@ mod qnetwork {
 
     #[test]
     fn bad_weights_are_refused_and_leave_the_network_unchanged() {
-        let spec = NetworkSpec::new("sequential", "sequential", TrunkKind::Mlp, vec![16]).unwrap();
+        let spec = NetworkSpec::new(small(), "sequential", TrunkKind::Mlp, vec![16]).unwrap();
         let mut net = QNetwork::new(spec.clone(), 1).unwrap();
         let x = obs(&spec, 3, 3);
         let before: Vec<f32> = Vec::try_from(net.q_values(&x).unwrap().flatten(0, -1)).unwrap();
 
-        let other = NetworkSpec::new("sequential", "creep", TrunkKind::Mlp, vec![16]).unwrap();
+        let other = NetworkSpec::new(small(), "creep", TrunkKind::Mlp, vec![16]).unwrap();
         let bytes = QNetwork::new(other, 1).unwrap().to_safetensors(1).unwrap();
         let err = net.load_safetensors(&bytes).unwrap_err();
         assert!(matches!(err, ModelError::SpecMismatch { .. }), "{err}");
@@ -258,7 +287,7 @@ mod qnetwork {
 
     #[test]
     fn inference_rejects_wrong_lengths_and_non_finite_input() {
-        let spec = NetworkSpec::new("sequential", "ttg", TrunkKind::Mlp, vec![8]).unwrap();
+        let spec = NetworkSpec::new(small(), "ttg", TrunkKind::Mlp, vec![8]).unwrap();
         let net = QNetwork::new(spec.clone(), 1).unwrap();
         let n = spec.input_len() as usize;
         let err = net.infer(&vec![0.0; n * 2 - 1], 2).unwrap_err();
@@ -281,15 +310,16 @@ mod qnetwork {
 
     #[test]
     fn invalid_specs_name_the_problem() {
-        let err = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![16]).unwrap_err();
+        let err = NetworkSpec::new(large(), "ttg", TrunkKind::Conv, vec![16]).unwrap_err();
         assert!(err.to_string().contains("conv trunk"), "{err}");
-        let err = NetworkSpec::new("birdseye", "ttg", TrunkKind::Mlp, vec![16]).unwrap_err();
+        let no_rows = ObservationLayout::new("large", 5, 0, 26, 4);
+        let err = NetworkSpec::new(no_rows, "ttg", TrunkKind::Mlp, vec![16]).unwrap_err();
         assert!(
             err.to_string()
-                .contains("unknown observation kind \"birdseye\""),
+                .contains("observation dimensions must be positive: large [5x0x26 + 4]"),
             "{err}"
         );
-        let err = NetworkSpec::new("ttg", "left", TrunkKind::Mlp, vec![16]).unwrap_err();
+        let err = NetworkSpec::new(large(), "left", TrunkKind::Mlp, vec![16]).unwrap_err();
         assert!(
             err.to_string().contains("unknown action set \"left\""),
             "{err}"
@@ -298,7 +328,7 @@ mod qnetwork {
 
     #[test]
     fn soft_and_hard_updates_move_towards_the_source() {
-        let spec = NetworkSpec::new("sequential", "creep", TrunkKind::Mlp, vec![8]).unwrap();
+        let spec = NetworkSpec::new(small(), "creep", TrunkKind::Mlp, vec![8]).unwrap();
         let online = QNetwork::new(spec.clone(), 1).unwrap();
         let mut target = QNetwork::new(spec.clone(), 2).unwrap();
         let x = obs(&spec, 4, 1);
@@ -412,7 +442,7 @@ fn a_bf16_trunk_follows_the_fp32_one_over_fp32_variables() {
             TrunkKind::Conv => vec![4, 8, 32],
             TrunkKind::Mlp => vec![32, 16],
         };
-        let spec = NetworkSpec::new("ttg", "ttg", trunk, hidden).expect("valid spec");
+        let spec = NetworkSpec::new(large(), "ttg", trunk, hidden).expect("valid spec");
         let f32_net = QNetwork::new(spec.clone(), 7).expect("network");
         let mut bf16_net = QNetwork::new(spec.clone(), 7).expect("network");
         bf16_net.set_precision(Precision::Bf16);
@@ -465,8 +495,8 @@ fn a_bf16_trunk_follows_the_fp32_one_over_fp32_variables() {
 fn auto_precision_is_bf16_only_for_training_a_conv_trunk_on_amx() {
     use crossroads_config::PrecisionSetting;
     use crossroads_model::Work;
-    let conv = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 32]).unwrap();
-    let mlp = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![32]).unwrap();
+    let conv = NetworkSpec::new(large(), "ttg", TrunkKind::Conv, vec![4, 8, 32]).unwrap();
+    let mlp = NetworkSpec::new(large(), "ttg", TrunkKind::Mlp, vec![32]).unwrap();
     let amx = crossroads_model::cpu_has_amx_bf16();
     let expected = if amx { Precision::Bf16 } else { Precision::F32 };
     let auto = PrecisionSetting::Auto;
@@ -542,7 +572,7 @@ fn the_native_mlp_gives_the_networks_q_values() {
             "a short row"
         );
     }
-    let conv = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 16]).expect("spec");
+    let conv = NetworkSpec::new(large(), "ttg", TrunkKind::Conv, vec![4, 8, 16]).expect("spec");
     let conv = QNetwork::new(conv, 1).expect("conv network");
     assert!(NativeMlp::of(&conv).expect("no copy").is_none(), "conv");
     let mut bf16 = QNetwork::new(plain_mlp(41, vec![16], 4), 1).expect("spec");
@@ -632,7 +662,7 @@ fn the_device_setting_resolves_to_the_cpu_or_names_what_is_missing() {
 fn auto_precision_is_fp32_on_a_cuda_device() {
     use crossroads_config::PrecisionSetting;
     use crossroads_model::Work;
-    let conv = NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 32]).unwrap();
+    let conv = NetworkSpec::new(large(), "ttg", TrunkKind::Conv, vec![4, 8, 32]).unwrap();
     for work in [Work::Training, Work::Acting] {
         for setting in [
             PrecisionSetting::Auto,
@@ -711,7 +741,7 @@ fn a_network_on_cuda_computes_what_the_cpu_one_does() {
             TrunkKind::Conv => vec![4, 8, 32],
             TrunkKind::Mlp => vec![32, 16],
         };
-        let spec = NetworkSpec::new("ttg", "ttg", trunk, hidden).expect("valid spec");
+        let spec = NetworkSpec::new(large(), "ttg", trunk, hidden).expect("valid spec");
         let cpu_net = QNetwork::new(spec.clone(), 7).expect("network");
         let mut gpu_net = QNetwork::new_on(spec.clone(), 7, cuda).expect("network");
         assert_eq!(gpu_net.device(), cuda);

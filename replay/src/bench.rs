@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use crossroads_common::Shutdown;
 
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{ObservationEncoding, ObservationLayout, Transition, TransitionBatch};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -20,6 +20,21 @@ use crate::table::{PreparedBatch, Table, TableConfig};
 const ROWS: usize = 18;
 const COLS: usize = 26;
 const CHANNELS: usize = 5;
+/// Dense values after the grid (none written: they stay 0).
+const EXTRA: usize = 4;
+
+/// The layout the synthetic batches carry: the grid above and [`EXTRA`]
+/// values, the size of the simulator's TTG view (the replay does not link
+/// the simulator; these grids are its own).
+fn layout() -> ObservationLayout {
+    ObservationLayout::new(
+        "ttg",
+        CHANNELS as i64,
+        ROWS as i64,
+        COLS as i64,
+        EXTRA as i64,
+    )
+}
 
 #[derive(Debug, Clone)]
 struct Car {
@@ -93,7 +108,7 @@ impl SyntheticEpisodes {
     /// sparse and each once (transition i's next state is i + 1's state).
     /// Episodes end (discount 0) with probability 1/100 per step.
     pub fn batch(&mut self, n: usize) -> TransitionBatch {
-        let mut b = TransitionBatch::new(ObservationSpec::ttg(), 5, ObservationEncoding::SparseF32);
+        let mut b = TransitionBatch::new(layout(), 5, ObservationEncoding::SparseF32);
         let mut current = b.push_observation(&self.grid());
         for _ in 0..n {
             let done = self.rng.random_range(0..100) == 0;

@@ -15,6 +15,7 @@
 //! relative to -1), a `u8` mask when channels > 1, and the references, each
 //! `ref_width(n_values)` bytes LE.
 
+use crossroads_types::ObservationLayout;
 use crossroads_types::codec::{self, ObservationEncoding};
 
 /// Channels (last dimension) folded into a cell's mask; above this a value
@@ -27,6 +28,15 @@ pub fn channels_of(shape: &[u32]) -> u32 {
         Some(&c) if (1..=MAX_MASK_CHANNELS).contains(&c) => c,
         _ => 1,
     }
+}
+
+/// The channel count for observations of `layout`: its last grid
+/// dimension (`cols`) taken as the shape's last, as [`channels_of`] reads
+/// it. The simulator's grids are wider than 8 columns, so they
+/// take 1, as the flat shapes of earlier builds did; either way the format
+/// is lossless.
+pub fn channels_of_layout(layout: &ObservationLayout) -> u32 {
+    channels_of(&[u32::try_from(layout.cols).unwrap_or(0)])
 }
 
 fn ref_width(n_values: usize) -> usize {

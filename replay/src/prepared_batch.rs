@@ -1,10 +1,8 @@
 //! A batch encoded into a table's compact format before the table's lock
 //! is taken, and its image in the write-ahead log.
 
-use crossroads_types::Columns;
-use crossroads_types::batch::{
-    BatchError, ObservationSpec, RejectReason, TransitionBatch, ValidBatch,
-};
+use crossroads_types::batch::{BatchError, RejectReason, TransitionBatch, ValidBatch};
+use crossroads_types::{Columns, ObservationLayout};
 
 use crate::compact;
 use crate::storage::content_hash;
@@ -14,7 +12,7 @@ use crate::table_image::{TableImage, check_image};
 /// table's lock is taken.
 #[derive(Debug, Clone)]
 pub struct PreparedBatch {
-    pub(crate) spec: ObservationSpec,
+    pub(crate) layout: ObservationLayout,
     pub(crate) num_actions: u32,
     /// The index columns refer to `entries`.
     pub(crate) columns: Columns,
@@ -28,8 +26,8 @@ impl PreparedBatch {
     /// checked again).
     pub fn new(batch: ValidBatch) -> Self {
         let batch = batch.into_inner();
-        let len = batch.spec.num_values().unwrap_or(0);
-        let channels = compact::channels_of(&batch.spec.shape);
+        let len = batch.layout.check().unwrap_or(0);
+        let channels = compact::channels_of_layout(&batch.layout);
         let pool = &batch.observations;
         let mut bytes = Vec::new();
         let mut entries = Vec::with_capacity(pool.len());
@@ -48,7 +46,7 @@ impl PreparedBatch {
             entries.push((content_hash(&bytes[start..]), start, bytes.len()));
         }
         Self {
-            spec: batch.spec,
+            layout: batch.layout,
             num_actions: batch.num_actions,
             columns: batch.columns,
             entries,
@@ -60,7 +58,7 @@ impl PreparedBatch {
     /// (what the write-ahead log stores; counters zero).
     pub fn to_image(&self, first_key: u64) -> TableImage {
         TableImage {
-            spec: Some((self.spec.clone(), self.num_actions)),
+            spec: Some((self.layout.clone(), self.num_actions)),
             next_key: first_key + self.len() as u64,
             items: self.columns.clone(),
             observation_offsets: self.entries.iter().map(|(_, s, _)| *s as u64).collect(),
@@ -71,14 +69,14 @@ impl PreparedBatch {
 
     /// The batch an image made by [`to_image`](Self::to_image) holds, and
     /// its first key; an image that does not hold together, or has no
-    /// spec, is refused.
+    /// layout, is refused.
     pub fn from_image(image: TableImage) -> Result<(u64, Self), BatchError> {
         let obs_len = check_image(&image)?;
-        let Some((spec, num_actions)) = image.spec.clone() else {
+        let Some((layout, num_actions)) = image.spec.clone() else {
             return Err(BatchError::new(
                 RejectReason::BadRequest,
-                "spec",
-                "a batch image must state its observation spec",
+                "layout",
+                "a batch image must state its observation layout",
             ));
         };
         let n_obs = image.observation_offsets.len();
@@ -106,7 +104,7 @@ impl PreparedBatch {
         Ok((
             first_key,
             Self {
-                spec,
+                layout,
                 num_actions,
                 columns: image.items,
                 entries,

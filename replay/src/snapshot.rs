@@ -10,10 +10,11 @@
 //! Format, little-endian: a 32-byte header (`CRRPLSNP`, format version
 //! u32, flags u32, body length u64, CRC-32 of the body u32, CRC-32 of the
 //! header's first 28 bytes u32), then the body: the table count, and per
-//! table its name, spec, keys, counters, item columns (oldest first) and
-//! compact observations. A truncated file fails the length check, a
-//! flipped bit a checksum; either is reported with the file's path and the
-//! file is renamed `*.corrupt` at restore, never deleted or overwritten.
+//! table its name, observation layout and action count, keys, counters,
+//! item columns (oldest first) and compact observations. A truncated file
+//! fails the length check, a flipped bit a checksum; either is reported
+//! with the file's path and the file is renamed `*.corrupt` at restore,
+//! never deleted or overwritten.
 //!
 //! At start the newest valid snapshot is restored. Snapshots that exist but
 //! are all corrupt are an error (starting empty would prune them), as is a
@@ -21,6 +22,12 @@
 //! restored image must hold only what valid batches could have put there,
 //! or `Table::restore` refuses it: samples are not checked again. Each
 //! snapshot first seals the write-ahead log's segment ([`crate::wal`]).
+//!
+//! Version 2 stores the layout (kind, channels, rows, cols, extra; spec
+//! flag 2). Version 1, written by earlier builds, stored the kind and a
+//! flat shape (spec flag 1); it is still read, as a legacy layout of that
+//! kind and length (`ObservationLayout::legacy`), which the table replaces
+//! with the layout of its next insert of the same kind and length.
 
 use std::fs::{self, File};
 use std::io::{Read, Write};
@@ -28,7 +35,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossroads_types::ObservationSpec;
+use crossroads_types::ObservationLayout;
 use crossroads_types::columns::{Columns, ROW_BYTES};
 
 use crate::metrics::ReplayMetrics;
@@ -37,8 +44,14 @@ use crate::wal::{Wal, WalError};
 
 /// First bytes of every snapshot.
 pub const MAGIC: &[u8; 8] = b"CRRPLSNP";
-/// Version of the format written.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the format written; 1 (earlier builds) is read too.
+pub const FORMAT_VERSION: u32 = 2;
+/// Spec flag of a table with no layout yet.
+const NO_SPEC: u8 = 0;
+/// Spec flag of a kind and a flat shape, as version 1 stored it.
+const LEGACY_SPEC: u8 = 1;
+/// Spec flag of a kind and a layout.
+const LAYOUT_SPEC: u8 = 2;
 const HEADER_LEN: usize = 32;
 const PREFIX: &str = "snapshot-";
 const SUFFIX: &str = ".crsnap";
@@ -132,14 +145,16 @@ pub fn with_header(body: &[u8]) -> Vec<u8> {
 pub(crate) fn encode_table(body: &mut Vec<u8>, name: &str, t: &TableImage) {
     put_str(body, name);
     match &t.spec {
-        Some((spec, actions)) => {
-            body.push(1);
-            put_str(body, &spec.kind);
-            put_u32(body, spec.shape.len() as u32);
-            spec.shape.iter().for_each(|d| put_u32(body, *d));
+        Some((layout, actions)) => {
+            body.push(LAYOUT_SPEC);
+            put_str(body, &layout.kind);
+            // A table's layout is valid: each value fits a u32.
+            for d in [layout.channels, layout.rows, layout.cols, layout.extra] {
+                put_u32(body, u32::try_from(d).unwrap_or(u32::MAX));
+            }
             put_u32(body, *actions);
         }
-        None => body.push(0),
+        None => body.push(NO_SPEC),
     }
     // Format 1 stores the insert and sample counts twice (once more as
     // the rate limiter's, which are the same counts).
@@ -187,9 +202,9 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<(String, TableImage)>, String> {
     if crc32fast::hash(&header[..28]) != header_crc {
         return Err("header checksum mismatch".to_owned());
     }
-    if version != FORMAT_VERSION {
+    if !(1..=FORMAT_VERSION).contains(&version) {
         return Err(format!(
-            "format version {version}, this build reads {FORMAT_VERSION}"
+            "format version {version}, this build reads 1 to {FORMAT_VERSION}"
         ));
     }
     if body.len() as u64 != body_len {
@@ -218,13 +233,34 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<(String, TableImage)>, String> {
 pub(crate) fn decode_table(r: &mut Reader<'_>) -> Result<(String, TableImage), String> {
     let name = r.str()?;
     let spec = match r.u8()? {
-        0 => None,
-        1 => {
+        NO_SPEC => None,
+        LEGACY_SPEC => {
             let kind = r.str()?;
             let rank = r.u32()? as usize;
             let shape = r.u32s(rank)?;
             let actions = r.u32()?;
-            Some((ObservationSpec::new(kind, shape), actions))
+            // An empty shape had no length: 0, refused at restore.
+            let len = if shape.is_empty() {
+                Some(0)
+            } else {
+                shape.iter().try_fold(1u32, |len, d| len.checked_mul(*d))
+            };
+            let len = len.ok_or_else(|| {
+                format!("table {name}: shape {shape:?} has more values than any observation")
+            })?;
+            Some((ObservationLayout::legacy(kind, i64::from(len)), actions))
+        }
+        LAYOUT_SPEC => {
+            let kind = r.str()?;
+            let (channels, rows, cols, extra) = (r.u32()?, r.u32()?, r.u32()?, r.u32()?);
+            let layout = ObservationLayout::new(
+                kind,
+                i64::from(channels),
+                i64::from(rows),
+                i64::from(cols),
+                i64::from(extra),
+            );
+            Some((layout, r.u32()?))
         }
         other => return Err(format!("table {name}: bad spec flag {other}")),
     };

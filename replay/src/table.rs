@@ -28,10 +28,12 @@ use std::time::{Duration, Instant};
 use crossroads_common::Shutdown;
 use crossroads_config::{ReplayConfig, WeightNormalization};
 use crossroads_types::batch::{
-    BatchError, MAX_OBSERVATION_LEN, ObservationPool, ObservationSpec, RejectReason, Transition,
-    TransitionBatch, check_priorities,
+    BatchError, MAX_OBSERVATION_LEN, ObservationPool, RejectReason, Transition, TransitionBatch,
+    check_priorities,
 };
-use crossroads_types::{Columns, ObservationEncoding, PrioritiesUpdated, Sample};
+use crossroads_types::{
+    Columns, ObservationEncoding, ObservationLayout, PrioritiesUpdated, Sample,
+};
 use parking_lot::Mutex;
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -196,7 +198,8 @@ impl TableStats {
 
 #[derive(Debug)]
 struct Inner {
-    spec: Option<(ObservationSpec, u32)>,
+    /// The observation layout and action count of every item.
+    spec: Option<(ObservationLayout, u32)>,
     tree: SumTree,
     store: ObservationStore,
     /// The ring of items; the index columns hold store ids.
@@ -682,7 +685,7 @@ const MAX_RESTORED_KEY: u64 = 1 << 63;
 /// What a sample copied out under the lock; finished into a [`Sample`]
 /// without it.
 struct RawSample {
-    spec: ObservationSpec,
+    layout: ObservationLayout,
     num_actions: u32,
     keys: Vec<u64>,
     weights: Vec<f32>,
@@ -694,7 +697,7 @@ struct RawSample {
 
 impl RawSample {
     fn finish(self) -> Result<Sample<TransitionBatch>, TableError> {
-        let len = self.spec.num_values().unwrap_or(MAX_OBSERVATION_LEN);
+        let len = self.layout.check().unwrap_or(MAX_OBSERVATION_LEN);
         let mut pool = ObservationPool::new(ObservationEncoding::SparseF32);
         let mut wire = Vec::new();
         for (id, bytes) in &self.observations {
@@ -706,7 +709,7 @@ impl RawSample {
             keys: self.keys,
             weights: self.weights,
             batch: TransitionBatch {
-                spec: self.spec,
+                layout: self.layout,
                 num_actions: self.num_actions,
                 columns: self.columns,
                 observations: pool,
@@ -768,19 +771,40 @@ impl Inner {
         self.tree.bytes() + self.store.bytes() + self.items.capacity_bytes()
     }
 
+    /// Checks that `batch` has the table's layout and action count. A
+    /// legacy layout, restored from a file of an earlier build, takes any
+    /// layout of its kind and length ([`ObservationLayout::reads_as`]).
     fn check_spec(&self, batch: &PreparedBatch) -> Result<(), BatchError> {
         match &self.spec {
-            Some((spec, actions)) if *spec != batch.spec || *actions != batch.num_actions => {
+            Some((layout, actions))
+                if !layout.reads_as(&batch.layout) || *actions != batch.num_actions =>
+            {
                 Err(BatchError::new(
                     RejectReason::Spec,
-                    "spec",
+                    "layout",
                     format!(
-                        "the table holds {spec} with {actions} actions; the batch is {} with {} actions",
-                        batch.spec, batch.num_actions
+                        "the table holds {layout} with {actions} actions; the batch is {} with {} actions",
+                        batch.layout, batch.num_actions
                     ),
                 ))
             }
             _ => Ok(()),
+        }
+    }
+
+    /// Takes the layout of `batch` (checked by [`check_spec`](Self::check_spec))
+    /// in place of a legacy one of the same kind and length, so samples carry
+    /// the layout the actors send from now on.
+    fn adopt_layout(&mut self, batch: &PreparedBatch) {
+        if let Some((layout, _)) = &mut self.spec
+            && *layout != batch.layout
+        {
+            tracing::info!(
+                legacy = %layout,
+                layout = %batch.layout,
+                "the table's layout, restored from a file of an earlier build, is now that of its inserts"
+            );
+            *layout = batch.layout.clone();
         }
     }
 
@@ -825,9 +849,10 @@ impl Inner {
     /// Takes room for `batch` (its spec checked by the caller).
     fn reserve(&mut self, batch: &PreparedBatch) {
         if self.spec.is_none() {
-            self.spec = Some((batch.spec.clone(), batch.num_actions));
+            self.spec = Some((batch.layout.clone(), batch.num_actions));
             self.spec_reserved = true;
         }
+        self.adopt_layout(batch);
         self.reserved = self.reserved.saturating_add(batch.len() as u64);
     }
 
@@ -842,8 +867,9 @@ impl Inner {
 
     fn insert(&mut self, config: &TableConfig, batch: &PreparedBatch) -> Inserted {
         if self.spec.is_none() {
-            self.spec = Some((batch.spec.clone(), batch.num_actions));
+            self.spec = Some((batch.layout.clone(), batch.num_actions));
         }
+        self.adopt_layout(batch);
         self.spec_reserved = false;
         let first_key = self.next_key;
         let mut ids = Interned::new(batch.entries.len());
@@ -903,13 +929,13 @@ impl Inner {
                 (distinct.len() - 1) as u32
             });
         }
-        let (spec, num_actions) = self
+        let (layout, num_actions) = self
             .spec
             .clone()
-            .unwrap_or_else(|| (ObservationSpec::new("", Vec::new()), 0));
+            .unwrap_or_else(|| (ObservationLayout::new("", 0, 0, 0, 0), 0));
         self.limiter.sampled(n as u64);
         RawSample {
-            spec,
+            layout,
             num_actions,
             keys: slots.iter().map(|s| self.key_of(*s, capacity)).collect(),
             weights,

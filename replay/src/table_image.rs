@@ -1,16 +1,16 @@
 //! A table's whole content as snapshots and the write-ahead log store it,
 //! and the check an image must pass before a table takes it in.
 
-use crossroads_types::batch::{
-    BatchError, ObservationSpec, RejectReason, Transition, TransitionBatch,
-};
-use crossroads_types::{Columns, ObservationEncoding};
+use crossroads_types::batch::{BatchError, RejectReason, Transition, TransitionBatch};
+use crossroads_types::{Columns, ObservationEncoding, ObservationLayout};
 
 /// A table's whole content in FIFO order, for snapshots.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct TableImage {
-    /// Spec and action count the table holds, if it got a batch.
-    pub spec: Option<(ObservationSpec, u32)>,
+    /// Observation layout and action count the table holds, if it got a
+    /// batch (a legacy layout, [`ObservationLayout::legacy`], when read
+    /// from a file of an earlier build).
+    pub spec: Option<(ObservationLayout, u32)>,
     /// Key the next insert gets; the items hold keys
     /// `next_key - len .. next_key`.
     pub next_key: u64,
@@ -66,28 +66,30 @@ pub(crate) fn check_image(image: &TableImage) -> Result<usize, BatchError> {
             "columns of different lengths",
         ));
     }
-    let Some((spec, num_actions)) = &image.spec else {
+    let Some((layout, num_actions)) = &image.spec else {
         if n == 0 {
             return Ok(0);
         }
         return Err(BatchError::new(
             RejectReason::Spec,
-            "spec",
-            format!("{n} items without a spec"),
+            "layout",
+            format!("{n} items without a layout"),
         ));
     };
-    let obs_len = spec
-        .num_values()
-        .filter(|_| !spec.kind.is_empty() && *num_actions > 0)
+    let obs_len = layout
+        .check()
+        .ok()
+        .filter(|_| *num_actions > 0)
         .ok_or_else(|| {
             BatchError::new(
                 RejectReason::Spec,
-                "spec",
-                format!("{spec} with {num_actions} actions is not a valid spec"),
+                "layout",
+                format!("{layout} with {num_actions} actions is not a valid layout"),
             )
         })?;
     // One transition at a time, through the batch check.
-    let mut one = TransitionBatch::new(spec.clone(), *num_actions, ObservationEncoding::SparseF32);
+    let mut one =
+        TransitionBatch::new(layout.clone(), *num_actions, ObservationEncoding::SparseF32);
     one.push_observation(&[]);
     one.push(Transition {
         observation: 0,

@@ -36,7 +36,10 @@
 //! body's length u32, the body's CRC-32 u32, then the body: a table's name
 //! and image as a snapshot stores it ([`snapshot::encode_table`]). A crash
 //! during a write leaves at most a torn last record, which fails its length
-//! or checksum: reading stops there and keeps what came before.
+//! or checksum: reading stops there and keeps what came before. Version 2
+//! records hold the observation layout; version 1 segments, of earlier
+//! builds, are still read (their flat shape as a legacy layout, as in
+//! [`snapshot`]).
 //!
 //! A write that fails (a full disk) truncates the segment back to its last
 //! whole record, seals it, and fails every insert of its group; for one
@@ -61,8 +64,8 @@ use crate::table::{Inserted, PreparedBatch, Reservation, Table, TableImage};
 
 /// First bytes of every segment.
 pub const MAGIC: &[u8; 8] = b"CRRPLWAL";
-/// Version of the format written.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the format written; 1 (earlier builds) is read too.
+pub const FORMAT_VERSION: u32 = 2;
 const HEADER_LEN: usize = 16;
 const PREFIX: &str = "wal-";
 const SUFFIX: &str = ".log";
@@ -194,9 +197,9 @@ pub fn decode_segment(bytes: &[u8]) -> Result<Decoded, String> {
         return Err("header checksum mismatch".to_owned());
     }
     let version = u32::from_le_bytes([header[8], header[9], header[10], header[11]]);
-    if version != FORMAT_VERSION {
+    if !(1..=FORMAT_VERSION).contains(&version) {
         return Err(format!(
-            "format version {version}, this build reads {FORMAT_VERSION}"
+            "format version {version}, this build reads 1 to {FORMAT_VERSION}"
         ));
     }
     let mut out = Decoded {

@@ -13,6 +13,14 @@ pub enum SimError {
         /// The names that exist, comma separated.
         known: String,
     },
+    /// No observation view has this name.
+    #[error("unknown observation {name:?}; expected one of {known}")]
+    UnknownObservation {
+        /// The name asked for.
+        name: String,
+        /// The names that exist, comma separated.
+        known: String,
+    },
     /// A scenario file could not be read.
     #[error("cannot read scenario file {path}: {source}")]
     Io {

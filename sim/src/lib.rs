@@ -42,6 +42,11 @@
 //! scenario order, downstream cars first) wins. Cars outside the grid, and
 //! cars in cells the sensor cannot see, are absent.
 //!
+//! The sizes are written only here: batches and networks carry them as the
+//! data [`ObsSpec::layout`] gives (a `crossroads_types::ObservationLayout`),
+//! and [`observation_layout`] gives a view's layout by name
+//! ([`OBSERVATION_KINDS`]) without building an environment.
+//!
 //! **TTG grid** ([`ObsKind::Ttg`], 18 x 26): fixed in the world, x from
 //! -104 to 104 m in 26 columns of 8 m (column 0 west), y from 18 to -18 m in
 //! 18 rows of 2 m (row 0 north). Channels:

@@ -1,7 +1,12 @@
 //! Bird's-eye grid observations: their geometry, channels, normalization and
 //! writing into caller-provided buffers. The layout is documented on the
 //! crate root.
+//!
+//! The sizes are written here only: batches and networks carry them as a
+//! `crossroads_types::ObservationLayout` ([`ObsSpec::layout`],
+//! [`observation_layout`]).
 
+use crossroads_types::ObservationLayout;
 use serde::{Deserialize, Serialize};
 
 use crate::env::{Env, TTC_CAP_S};
@@ -80,6 +85,55 @@ impl ObsSpec {
     pub fn index(&self, channel: usize, row: usize, col: usize) -> usize {
         (channel * self.rows + row) * self.cols + col
     }
+
+    /// The view's name in [`OBSERVATION_KINDS`]: the grid's, with
+    /// `-occlusion` when it has the occluded channel.
+    pub fn name(&self) -> String {
+        if self.occlusion {
+            format!("{}-occlusion", self.kind.name())
+        } else {
+            self.kind.name().to_owned()
+        }
+    }
+
+    /// The layout batches and networks carry for this shape.
+    pub fn layout(&self) -> ObservationLayout {
+        ObservationLayout::new(
+            self.name(),
+            self.channels as i64,
+            self.rows as i64,
+            self.cols as i64,
+            self.ego_features as i64,
+        )
+    }
+}
+
+/// The observation views by name ([`ObsSpec::name`]): each grid with and
+/// without the occluded channel.
+pub const OBSERVATION_KINDS: [&str; 4] =
+    ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
+
+/// The shape of the view named `kind` (one of [`OBSERVATION_KINDS`]),
+/// without building an environment.
+pub fn observation_spec(kind: &str) -> Result<ObsSpec, SimError> {
+    let (grid, occlusion) = match kind {
+        "ttg" => (ObsKind::Ttg, false),
+        "ttg-occlusion" => (ObsKind::Ttg, true),
+        "sequential" => (ObsKind::Sequential, false),
+        "sequential-occlusion" => (ObsKind::Sequential, true),
+        other => {
+            return Err(SimError::UnknownObservation {
+                name: other.to_owned(),
+                known: OBSERVATION_KINDS.join(", "),
+            });
+        }
+    };
+    Ok(grid.spec(occlusion))
+}
+
+/// The layout of the view named `kind` ([`observation_spec`]`.layout()`).
+pub fn observation_layout(kind: &str) -> Result<ObservationLayout, SimError> {
+    observation_spec(kind).map(|spec| spec.layout())
 }
 
 impl ObsKind {

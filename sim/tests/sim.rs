@@ -920,3 +920,38 @@ fn another_population_replaces_the_first_one_whole() {
     assert_eq!(back.spec(), left.spec());
     assert_eq!(spread.spec().traffic, left.spec().traffic);
 }
+
+/// Every view named in `OBSERVATION_KINDS` has the layout an environment
+/// writes, without building one; the layout is the one batches and
+/// networks carry (the sizes live here only).
+#[test]
+fn each_named_view_has_the_layout_its_environments_write() {
+    for (name, set) in [
+        ("left", ActionSet::Ttg),
+        ("left", ActionSet::Sequential),
+        ("occluded", ActionSet::Creep),
+        ("occluded", ActionSet::Sequential),
+    ] {
+        let spec = env(name, set).obs_spec();
+        let layout = spec.layout();
+        assert!(
+            OBSERVATION_KINDS.contains(&layout.kind.as_str()),
+            "{layout}"
+        );
+        assert_eq!(observation_layout(&layout.kind).unwrap(), layout);
+        assert_eq!(observation_spec(&layout.kind).unwrap(), spec);
+        assert_eq!(layout.len(), spec.len() as i64, "{layout}");
+        assert_eq!(layout.extra, EGO_FEATURES as i64);
+    }
+    let ttg = observation_layout("ttg").unwrap();
+    assert_eq!(
+        (ttg.channels, ttg.rows, ttg.cols, ttg.extra),
+        (5, 18, 26, 4)
+    );
+    assert_eq!(ttg.to_string(), "ttg [5x18x26 + 4]");
+    let err = observation_layout("birdseye").unwrap_err().to_string();
+    assert!(
+        err.contains("birdseye") && err.contains("sequential-occlusion"),
+        "{err}"
+    );
+}

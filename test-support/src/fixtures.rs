@@ -2,13 +2,17 @@
 
 use std::path::Path;
 
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{ObservationEncoding, ObservationLayout, Transition, TransitionBatch};
 
-/// Ten transitions over time-to-go observations, five actions: rewards 0
-/// to 9, actions `i % 5`, each observation one cell on from the last.
-pub fn toy_batch() -> TransitionBatch {
-    let mut b = TransitionBatch::new(ObservationSpec::ttg(), 5, ObservationEncoding::SparseF32);
-    let mut grid = vec![0.0; ObservationSpec::ttg().num_values().expect("a shape")];
+/// Ten transitions over observations of `layout` (at least 30 values; the
+/// simulator's TTG view, say, as `crossroads_sim::observation_layout`
+/// gives it), five actions: rewards 0 to 9, actions `i % 5`, each
+/// observation one cell on from the last.
+pub fn toy_batch(layout: ObservationLayout) -> TransitionBatch {
+    let len = layout.check().expect("a valid layout");
+    assert!(len >= 30, "{layout} is too small for ten steps");
+    let mut b = TransitionBatch::new(layout, 5, ObservationEncoding::SparseF32);
+    let mut grid = vec![0.0; len];
     let mut current = b.push_observation(&grid);
     for i in 0..10 {
         grid[i * 3 + 2] = 1.0;

@@ -38,8 +38,14 @@ fn every_experiment_config_is_valid_and_consistent() {
         let scenario = Arc::new(Scenario::load(&c.sim.scenario).expect("scenario"));
         let actions: ActionSet = c.sim.action_set.parse().expect("action set");
         let env = Env::new(scenario, EnvConfig::for_actions(actions));
-        let kind = crossroads_actor::batch_spec(env.obs_spec()).kind;
-        assert_eq!(sim.observation(), Some(kind.as_str()), "{}", path.display());
+        let layout = env.obs_spec().layout();
+        assert_eq!(
+            sim.observation(),
+            Some(layout.kind.as_str()),
+            "{}",
+            path.display()
+        );
+        assert_eq!(sim.layout(), Some(&layout), "{}", path.display());
         let stem = path
             .file_stem()
             .expect("stem")

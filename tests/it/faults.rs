@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use crossroads_config::TransportConfig;
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_transport::learner_client::LearnerClient;
-use crossroads_types::{ObservationEncoding, ObservationSpec, Transition, TransitionBatch};
+use crossroads_types::{ObservationEncoding, ObservationLayout, Transition, TransitionBatch};
 use rand::{RngExt, SeedableRng};
 use std::sync::Mutex;
 
@@ -58,8 +58,8 @@ fn runtime() -> tokio::runtime::Runtime {
 /// Ten transitions whose rewards all carry `tag`, so the stored items
 /// tell which batches came through.
 fn tagged(tag: u32) -> TransitionBatch {
-    let spec = ObservationSpec::new("toy", [4, 4, 2]);
-    let mut b = TransitionBatch::new(spec, 5, ObservationEncoding::SparseF32);
+    let layout = ObservationLayout::new("toy", 4, 4, 2, 0);
+    let mut b = TransitionBatch::new(layout, 5, ObservationEncoding::SparseF32);
     let mut grid = vec![0.0; 32];
     let mut current = b.push_observation(&grid);
     for i in 0..10 {

@@ -58,7 +58,9 @@ fn replay_serves_until_sigterm_and_restores_its_snapshot() {
     let ack = runtime()
         .block_on(async {
             ReplayClient::new(&transport, "cli")?
-                .insert(toy_batch())
+                .insert(toy_batch(
+                    crossroads_sim::observation_layout("ttg").expect("a view"),
+                ))
                 .await
         })
         .expect("insert");

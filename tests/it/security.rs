@@ -21,6 +21,12 @@ use rcgen::{
 
 const TOKEN: &str = "c0rrect-h0rse-battery-staple";
 
+/// The layout of the simulator's TTG view, which [`config`]'s network
+/// reads.
+fn ttg() -> crossroads_types::ObservationLayout {
+    crossroads_sim::observation_layout("ttg").expect("a view")
+}
+
 /// PEM files of a throwaway PKI in a temporary folder: a CA, a server
 /// certificate for `localhost` and 127.0.0.1, a client certificate, and a
 /// second CA that signed neither (a stranger's).
@@ -110,7 +116,7 @@ fn config() -> Config {
     c.learner.batch_size = 8;
     c.learner.publish_every = 5;
     c.sim.action_set = "ttg".to_owned();
-    c.sim.observation = Some("ttg".to_owned());
+    crossroads_actor::resolve_observation(&mut c.sim).expect("a built-in pairing");
     c.transport.auth.token_env = String::new();
     c.transport.connect_timeout_ms = 5_000;
     c.transport.request_timeout_ms = 10_000;
@@ -165,7 +171,10 @@ fn tls_with_token_carries_inserts_samples_and_weights_and_guards_every_mutating_
             .await
             .expect("replay over TLS");
         let client = replay_client(&c.transport, "https", replay.local_addr());
-        let ack = client.insert(toy_batch()).await.expect("insert over TLS");
+        let ack = client
+            .insert(toy_batch(ttg()))
+            .await
+            .expect("insert over TLS");
         assert_eq!(ack.inserted, 10);
         let sample = client
             .sample(4, 0.4, Duration::from_secs(5))
@@ -185,7 +194,7 @@ fn tls_with_token_carries_inserts_samples_and_weights_and_guards_every_mutating_
         anonymous.auth.token_file = None;
         let anonymous = replay_client(&anonymous, "https", replay.local_addr());
         let missing = "missing authorization metadata";
-        assert_unauthenticated(anonymous.insert(toy_batch()).await, missing);
+        assert_unauthenticated(anonymous.insert(toy_batch(ttg())).await, missing);
         assert_unauthenticated(
             anonymous.sample(4, 0.4, Duration::from_secs(1)).await,
             missing,
@@ -209,7 +218,7 @@ fn tls_with_token_carries_inserts_samples_and_weights_and_guards_every_mutating_
         wrong.auth.token_file = Some(wrong_file);
         let wrong = replay_client(&wrong, "https", replay.local_addr());
         let differs = "does not match";
-        assert_unauthenticated(wrong.insert(toy_batch()).await, differs);
+        assert_unauthenticated(wrong.insert(toy_batch(ttg())).await, differs);
         assert_unauthenticated(wrong.sample(4, 0.4, Duration::from_secs(1)).await, differs);
         assert_unauthenticated(wrong.join_actor("c").await, differs);
         assert_eq!(client.info().await.expect("info").size, 10);
@@ -401,7 +410,7 @@ fn mutual_tls_refuses_a_client_without_a_certificate() {
         for _ in 0..3 {
             let err = no_cert.info().await.expect_err("no client certificate");
             assert!(err.to_string().contains("transport error"), "{err}");
-            assert!(no_cert.insert(toy_batch()).await.is_err());
+            assert!(no_cert.insert(toy_batch(ttg())).await.is_err());
         }
 
         let with_cert = replay_client(&c.transport, "https", addr);
@@ -412,7 +421,7 @@ fn mutual_tls_refuses_a_client_without_a_certificate() {
         );
         assert_eq!(
             with_cert
-                .insert(toy_batch())
+                .insert(toy_batch(ttg()))
                 .await
                 .expect("insert")
                 .inserted,
@@ -585,7 +594,7 @@ fn make_certs_script_makes_certificates_the_servers_and_clients_accept() {
             t.replay_endpoint = format!("https://{host}:{port}");
             let client = ReplayClient::new(&t, &c.replay.table).expect("client");
             let ack = client
-                .insert(toy_batch())
+                .insert(toy_batch(ttg()))
                 .await
                 .unwrap_or_else(|e| panic!("insert by {host}: {e}"));
             assert_eq!(ack.inserted, 10, "{host}");
@@ -594,7 +603,7 @@ fn make_certs_script_makes_certificates_the_servers_and_clients_accept() {
         no_token.auth.token_file = None;
         assert_unauthenticated(
             replay_client(&no_token, "https", replay.local_addr())
-                .insert(toy_batch())
+                .insert(toy_batch(ttg()))
                 .await,
             "missing authorization metadata",
         );

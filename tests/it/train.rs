@@ -231,7 +231,7 @@ fn a_tiny_run_across_real_processes_writes_its_folder_and_resumes() {
 fn a_checkpoint_for_other_actions_is_refused_by_eval() {
     let dir = tempfile::tempdir().expect("temp dir");
     let spec = crossroads_model::NetworkSpec::new(
-        "sequential",
+        crossroads_sim::observation_layout("sequential").expect("a view"),
         "sequential",
         crossroads_model::TrunkKind::Mlp,
         vec![8],

@@ -1,7 +1,9 @@
 //! The learner's conversations in domain types, and their conversion to
 //! and from `crossroads_proto`, validating what comes in: network specs,
 //! weights ([`Weights`]) and checkpoint descriptions
-//! ([`CheckpointSummary`]).
+//! ([`CheckpointSummary`]). An [`ObservationLayout`] has one wire form
+//! ([`layout_to_wire`], [`layout_from_wire`]), for network specs and
+//! transition batches (`crate::wire`) alike.
 
 use crossroads_proto::v1 as pb;
 use crossroads_types::{NetworkSpec, ObservationLayout, TrunkKind, Weights};
@@ -59,43 +61,79 @@ pub fn checkpoint_from_wire(c: pb::CheckpointInfo) -> CheckpointSummary {
     }
 }
 
-/// A network spec on the wire: observation kind and `[channels, rows,
-/// cols]`, the dense features after the grid in `extra_features`.
+/// An observation layout on the wire: its kind, `shape` `[channels, rows,
+/// cols]` and `extra_features`.
+pub fn layout_to_wire(l: &ObservationLayout) -> pb::ObservationSpec {
+    pb::ObservationSpec {
+        kind: l.kind.clone(),
+        shape: [l.channels, l.rows, l.cols]
+            .iter()
+            .map(|&d| d as u32)
+            .collect(),
+        extra_features: l.extra as u32,
+    }
+}
+
+/// An observation layout from the wire, not checked beyond its form (the
+/// batch's or the spec's validation checks its values). The error says
+/// what is wrong with `shape`, for the caller to name the field: a shape
+/// that is not `[channels, rows, cols]`, such as the flat `[len]` of
+/// earlier builds.
+pub fn layout_from_wire(o: pb::ObservationSpec) -> Result<ObservationLayout, String> {
+    let [channels, rows, cols] = o.shape[..] else {
+        let flat = if o.shape.len() == 1 {
+            "; a flat [len] is what builds before the layout travelled send: \
+             run actors, replay server and learner of the same build"
+        } else {
+            ""
+        };
+        return Err(format!(
+            "must be [channels, rows, cols] (then extra_features dense values), got {:?}{flat}",
+            o.shape
+        ));
+    };
+    Ok(ObservationLayout::new(
+        o.kind,
+        i64::from(channels),
+        i64::from(rows),
+        i64::from(cols),
+        i64::from(o.extra_features),
+    ))
+}
+
+/// A network spec on the wire: its observation layout
+/// ([`layout_to_wire`]), with the dense features also in the spec's own
+/// `extra_features`, where builds before the layout travelled read them.
 pub fn spec_to_wire(s: &NetworkSpec) -> pb::NetworkSpec {
-    let o = &s.observation;
     pb::NetworkSpec {
-        observation: Some(pb::ObservationSpec {
-            kind: o.kind.clone(),
-            shape: [o.channels, o.rows, o.cols]
-                .iter()
-                .map(|&d| d as u32)
-                .collect(),
-        }),
+        observation: Some(layout_to_wire(&s.observation)),
         action_set: s.action_set.clone(),
         num_actions: s.num_actions as u32,
         trunk: s.trunk.name().to_owned(),
         hidden: s.hidden.iter().map(|&h| h as u32).collect(),
-        extra_features: o.extra as u32,
+        extra_features: s.observation.extra as u32,
     }
 }
 
-/// A network spec from the wire, checked.
+/// A network spec from the wire, checked. The dense features are read
+/// from the layout or, from a build that wrote them only there, from the
+/// spec's own `extra_features`; set in both, they must agree.
 pub fn spec_from_wire(s: pb::NetworkSpec) -> Result<NetworkSpec, String> {
     let o = s.observation.ok_or("spec.observation is missing")?;
-    let [channels, rows, cols] = o.shape[..] else {
-        return Err(format!(
-            "spec.observation.shape must be [channels, rows, cols], got {:?}",
-            o.shape
-        ));
-    };
+    let mut observation = layout_from_wire(o).map_err(|e| format!("spec.observation.shape {e}"))?;
+    match (observation.extra, i64::from(s.extra_features)) {
+        (_, 0) => {}
+        (0, theirs) => observation.extra = theirs,
+        (ours, theirs) if ours != theirs => {
+            return Err(format!(
+                "spec.observation.extra_features is {ours}, spec.extra_features {theirs}; \
+                 they must agree"
+            ));
+        }
+        _ => {}
+    }
     let spec = NetworkSpec {
-        observation: ObservationLayout {
-            kind: o.kind,
-            channels: i64::from(channels),
-            rows: i64::from(rows),
-            cols: i64::from(cols),
-            extra: i64::from(s.extra_features),
-        },
+        observation,
         action_set: s.action_set,
         num_actions: i64::from(s.num_actions),
         trunk: TrunkKind::parse(&s.trunk).map_err(|e| e.to_string())?,

@@ -34,8 +34,9 @@ use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crossroads_config::TransportConfig;
+use crossroads_types::ObservationLayout;
 use crossroads_types::batch::{
-    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch, ValidBatch,
+    BatchError, ObservationPool, RejectReason, TransitionBatch, ValidBatch,
 };
 use crossroads_types::codec::ObservationEncoding;
 use crossroads_types::columns::{Columns, ROW_BYTES};
@@ -44,10 +45,10 @@ use crate::iox::{self, FrameServiceSettings, open_frame_service};
 
 /// `CRB1`, little-endian: marks a frame of this format.
 pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"CRB1");
-/// Version of the frame layout.
-pub const FRAME_VERSION: u32 = 1;
-/// Largest observation rank a frame carries.
-pub const MAX_RANK: usize = 8;
+/// Version of the frame layout (2: the observation layout as `channels`,
+/// `rows`, `cols` and `extra_features`, as on gRPC, where 1 had a flat
+/// shape).
+pub const FRAME_VERSION: u32 = 2;
 /// Longest observation kind, bytes.
 pub const MAX_KIND: usize = 32;
 /// Longest table name, bytes.
@@ -82,13 +83,17 @@ pub struct BatchFrameHeader {
     pub encoding: u32,
     /// Bytes of pool data.
     pub data_len: u32,
-    /// Dimensions used in `shape`.
-    pub rank: u32,
-    /// Observation shape, first `rank` entries.
-    pub shape: [u32; MAX_RANK],
+    /// The observation layout's grid channels.
+    pub channels: u32,
+    /// Its grid rows.
+    pub rows: u32,
+    /// Its grid columns.
+    pub cols: u32,
+    /// Its dense values after the grid.
+    pub extra_features: u32,
     /// Bytes used in `kind`.
     pub kind_len: u32,
-    /// Observation kind, UTF-8.
+    /// The observation layout's kind, UTF-8.
     pub kind: [u8; MAX_KIND],
     /// Bytes used in `table`.
     pub table_len: u32,
@@ -107,8 +112,10 @@ impl Default for BatchFrameHeader {
             num_actions: 0,
             encoding: 0,
             data_len: 0,
-            rank: 0,
-            shape: [0; MAX_RANK],
+            channels: 0,
+            rows: 0,
+            cols: 0,
+            extra_features: 0,
             kind_len: 0,
             kind: [0; MAX_KIND],
             table_len: 0,
@@ -140,11 +147,16 @@ impl BatchFrameHeader {
             .map_err(|_| too_big("observations.data", "more than 4 GiB".into()))?;
         h.num_actions = batch.num_actions;
         h.encoding = batch.observations.encoding().to_wire();
-        let rank_above = |n, max| format!("rank {n} is above {max}");
+        let layout = &batch.layout;
+        // A valid batch's dimensions are between 0 and MAX_OBSERVATION_LEN.
+        let dim = |d: i64| u32::try_from(d).unwrap_or(u32::MAX);
+        h.channels = dim(layout.channels);
+        h.rows = dim(layout.rows);
+        h.cols = dim(layout.cols);
+        h.extra_features = dim(layout.extra);
         let bytes_above = |n, max| format!("{n} bytes is above {max}");
-        h.rank = copy_fixed("spec.shape", &batch.spec.shape, &mut h.shape, rank_above)?;
-        let kind = batch.spec.kind.as_bytes();
-        h.kind_len = copy_fixed("spec.kind", kind, &mut h.kind, bytes_above)?;
+        let kind = layout.kind.as_bytes();
+        h.kind_len = copy_fixed("layout.kind", kind, &mut h.kind, bytes_above)?;
         h.table_len = copy_fixed("table", table.as_bytes(), &mut h.table, bytes_above)?;
         Ok((h, h.payload_len()))
     }
@@ -297,11 +309,16 @@ pub fn read_frame(
         .kind
         .get(..header.kind_len as usize)
         .and_then(|b| std::str::from_utf8(b).ok())
-        .ok_or_else(|| BatchError::new(RejectReason::Spec, "spec.kind", "not UTF-8 or too long"))?;
-    let shape = header
-        .shape
-        .get(..header.rank as usize)
-        .ok_or_else(|| BatchError::new(RejectReason::Spec, "spec.shape", "rank above 8"))?;
+        .ok_or_else(|| {
+            BatchError::new(RejectReason::Spec, "layout.kind", "not UTF-8 or too long")
+        })?;
+    let layout = ObservationLayout::new(
+        kind,
+        i64::from(header.channels),
+        i64::from(header.rows),
+        i64::from(header.cols),
+        i64::from(header.extra_features),
+    );
     let encoding = ObservationEncoding::from_wire(header.encoding).ok_or_else(|| {
         BatchError::new(
             RejectReason::ObservationEncoding,
@@ -318,7 +335,7 @@ pub fn read_frame(
         .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
     let batch = ValidBatch::new(TransitionBatch {
-        spec: ObservationSpec::new(kind, shape),
+        layout,
         num_actions: header.num_actions,
         // Whole rows: the payload's length is the header's.
         columns: Columns::read_le(columns).unwrap_or_default(),
@@ -638,7 +655,7 @@ mod tests {
     #[test]
     fn frame_round_trip() {
         let mut b = TransitionBatch::new(
-            ObservationSpec::new("toy", [2, 2]),
+            ObservationLayout::new("toy", 1, 2, 2, 0),
             3,
             ObservationEncoding::SparseF32,
         );
@@ -663,10 +680,10 @@ mod tests {
         assert_eq!(back, b);
 
         let mut long = b.clone().into_inner();
-        long.spec.kind = "k".repeat(MAX_KIND + 1);
+        long.layout.kind = "k".repeat(MAX_KIND + 1);
         let long = ValidBatch::new(long).expect("valid, only too long for a frame");
         let err = BatchFrameHeader::for_batch("t", 0, &long).expect_err("kind too long");
-        assert_eq!(err.to_string(), "spec.kind: 33 bytes is above 32");
+        assert_eq!(err.to_string(), "layout.kind: 33 bytes is above 32");
         let err =
             BatchFrameHeader::for_batch(&"t".repeat(MAX_TABLE + 1), 0, &b).expect_err("table");
         assert_eq!(err.to_string(), "table: 65 bytes is above 64");

@@ -99,14 +99,20 @@ impl WeightsWatch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crossroads_types::{NetworkSpec, TrunkKind};
+    use crossroads_types::{NetworkSpec, ObservationLayout, TrunkKind};
 
     fn weights(version: u64) -> Weights {
         Weights {
             version,
             update_step: version * 10,
             published_unix_ms: 0,
-            spec: NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8]).expect("spec"),
+            spec: NetworkSpec::new(
+                ObservationLayout::new("toy", 2, 3, 4, 1),
+                "ttg",
+                TrunkKind::Mlp,
+                vec![8],
+            )
+            .expect("spec"),
             safetensors: Vec::new(),
         }
     }

@@ -6,19 +6,23 @@
 
 use crossroads_proto::v1 as pb;
 use crossroads_types::batch::{
-    BatchError, ObservationPool, ObservationSpec, RejectReason, TransitionBatch, ValidBatch,
+    BatchError, ObservationPool, RejectReason, TransitionBatch, ValidBatch,
 };
 use crossroads_types::codec::ObservationEncoding;
 use crossroads_types::{Columns, Sample};
 
+use crate::convert::{layout_from_wire, layout_to_wire};
 use crate::grpc::{RateLimiterInfo, TableInfo};
 
 /// A wire batch as a validated domain batch. Errors name the field as the
-/// wire calls it (`rewards[3]`, `observations.encoding`, ...).
+/// wire calls it (`rewards[3]`, `observations.encoding`, `spec.shape`,
+/// ...); the batch's layout travels in `spec`.
 pub fn batch_from_wire(batch: pb::TransitionBatch) -> Result<ValidBatch, BatchError> {
     let spec = batch
         .spec
         .ok_or_else(|| BatchError::new(RejectReason::Spec, "spec", "missing observation spec"))?;
+    let layout = layout_from_wire(spec)
+        .map_err(|problem| BatchError::new(RejectReason::Spec, "spec.shape", problem))?;
     let pool = batch.observations.ok_or_else(|| {
         BatchError::new(
             RejectReason::ObservationEncoding,
@@ -40,10 +44,7 @@ pub fn batch_from_wire(batch: pb::TransitionBatch) -> Result<ValidBatch, BatchEr
             )
         })?;
     ValidBatch::new(TransitionBatch {
-        spec: ObservationSpec {
-            kind: spec.kind,
-            shape: spec.shape,
-        },
+        layout,
         num_actions: batch.num_actions,
         columns: Columns {
             actions: batch.actions,
@@ -62,10 +63,7 @@ pub fn batch_to_wire(batch: TransitionBatch) -> pb::TransitionBatch {
     let (encoding, offsets, data) = batch.observations.into_parts();
     let c = batch.columns;
     pb::TransitionBatch {
-        spec: Some(pb::ObservationSpec {
-            kind: batch.spec.kind,
-            shape: batch.spec.shape,
-        }),
+        spec: Some(layout_to_wire(&batch.layout)),
         num_actions: batch.num_actions,
         actions: c.actions,
         rewards: c.rewards,
@@ -167,12 +165,13 @@ pub fn table_info_from_wire(i: pb::TableInfo) -> TableInfo {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crossroads_types::ObservationLayout;
     use crossroads_types::batch::Transition;
 
     #[test]
     fn round_trip_and_boundary_errors() {
         let mut b = TransitionBatch::new(
-            ObservationSpec::new("toy", [4]),
+            ObservationLayout::new("toy", 1, 1, 3, 1),
             2,
             ObservationEncoding::DenseF32,
         );
@@ -196,15 +195,34 @@ mod tests {
         let err = batch_from_wire(bad).expect_err("unknown encoding");
         assert_eq!(err.field, "observations.encoding");
 
-        let mut bad = wire;
+        let mut bad = wire.clone();
         bad.spec = None;
         assert_eq!(batch_from_wire(bad).expect_err("no spec").field, "spec");
+
+        // The layout travels as [channels, rows, cols] and extra_features;
+        // an earlier build's flat [len] is refused, naming what is expected.
+        let spec = wire.spec.as_ref().expect("spec");
+        assert_eq!(spec.shape, vec![1, 1, 3]);
+        assert_eq!(spec.extra_features, 1);
+        let mut flat = wire;
+        flat.spec = Some(pb::ObservationSpec {
+            kind: "toy".to_owned(),
+            shape: vec![4],
+            extra_features: 0,
+        });
+        let err = batch_from_wire(flat).expect_err("a flat shape");
+        assert_eq!(
+            (err.reason, err.field.as_str()),
+            (RejectReason::Spec, "spec.shape")
+        );
+        assert!(err.problem.contains("[channels, rows, cols]"), "{err}");
+        assert!(err.problem.contains("same build"), "{err}");
     }
 
     #[test]
     fn a_sample_carries_its_priorities_once() {
         let mut b = TransitionBatch::new(
-            ObservationSpec::new("toy", [2]),
+            ObservationLayout::new("toy", 1, 1, 2, 0),
             2,
             ObservationEncoding::SparseF32,
         );

@@ -14,59 +14,11 @@ use std::fmt;
 
 use crate::codec::{self, CodecError, ObservationEncoding};
 use crate::columns::Columns;
+use crate::spec::ObservationLayout;
 
 /// Largest observation accepted, in values (a guard against shapes whose
 /// product overflows or exhausts memory).
 pub const MAX_OBSERVATION_LEN: usize = 1 << 24;
-
-/// What one observation is: the simulator view and its row-major shape.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct ObservationSpec {
-    /// Simulator view, e.g. `ttg`.
-    pub kind: String,
-    /// Row-major dimensions, e.g. `[18, 26, 5]`.
-    pub shape: Vec<u32>,
-}
-
-impl ObservationSpec {
-    /// A spec of `kind` and `shape`.
-    pub fn new(kind: impl Into<String>, shape: impl Into<Vec<u32>>) -> Self {
-        Self {
-            kind: kind.into(),
-            shape: shape.into(),
-        }
-    }
-
-    /// The time-to-go observation as actors send it: flat, the 18 x 26
-    /// grid of 5 channels (occupancy, heading, speed, x and y offset in the
-    /// cell) and the ego's features, as [`ObservationLayout`] lays it out
-    /// (2344 values).
-    ///
-    /// [`ObservationLayout`]: crate::spec::ObservationLayout
-    pub fn ttg() -> Self {
-        let layout = crate::spec::ObservationLayout::named("ttg").expect("a built-in kind");
-        Self::new("ttg", [layout.len() as u32])
-    }
-
-    /// Number of values of one observation; `None` if the shape is empty or
-    /// larger than [`MAX_OBSERVATION_LEN`].
-    pub fn num_values(&self) -> Option<usize> {
-        if self.shape.is_empty() {
-            return None;
-        }
-        self.shape
-            .iter()
-            .try_fold(1usize, |acc, d| acc.checked_mul(*d as usize))
-            .filter(|n| (1..=MAX_OBSERVATION_LEN).contains(n))
-    }
-}
-
-impl fmt::Display for ObservationSpec {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let dims: Vec<String> = self.shape.iter().map(ToString::to_string).collect();
-        write!(f, "{} [{}]", self.kind, dims.join("x"))
-    }
-}
 
 /// Encoded observations; transitions refer to entries by index.
 #[derive(Debug, Clone, PartialEq)]
@@ -192,7 +144,7 @@ pub struct Transition {
 #[derive(Debug, Clone, PartialEq)]
 pub struct TransitionBatch {
     /// What each observation is.
-    pub spec: ObservationSpec,
+    pub layout: ObservationLayout,
     /// Size of the action set; every action is below it.
     pub num_actions: u32,
     /// The transitions; the index columns refer to `observations`.
@@ -203,16 +155,16 @@ pub struct TransitionBatch {
 
 impl TransitionBatch {
     /// An empty batch.
-    pub fn new(spec: ObservationSpec, num_actions: u32, encoding: ObservationEncoding) -> Self {
+    pub fn new(layout: ObservationLayout, num_actions: u32, encoding: ObservationEncoding) -> Self {
         Self {
-            spec,
+            layout,
             num_actions,
             columns: Columns::default(),
             observations: ObservationPool::new(encoding),
         }
     }
 
-    /// Adds an observation (values in the spec's row-major order); returns
+    /// Adds an observation (values in the layout's order); returns
     /// its pool index for [`Transition`]s.
     pub fn push_observation(&mut self, values: &[f32]) -> u32 {
         self.observations.push_values(values)
@@ -238,30 +190,18 @@ impl TransitionBatch {
         self.columns.get(i)
     }
 
-    /// Checks everything a receiver relies on: a known spec, equal column
-    /// lengths, finite rewards, discounts in [0, 1], finite non-negative
-    /// priorities, actions below `num_actions`, pool indices in range and
-    /// every observation entry valid for the spec's length. The first
+    /// Checks everything a receiver relies on: a valid layout
+    /// ([`ObservationLayout::check`]), equal column lengths, finite
+    /// rewards, discounts in [0, 1], finite non-negative priorities,
+    /// actions below `num_actions`, pool indices in range and every
+    /// observation entry valid for the layout's length. The first
     /// problem found is returned, naming its field. [`ValidBatch::new`] is
     /// this check with a type for its success.
     pub fn validate(&self) -> Result<(), BatchError> {
-        let obs_len = self.spec.num_values().ok_or_else(|| {
-            BatchError::new(
-                RejectReason::Spec,
-                "spec.shape",
-                format!(
-                    "must be non-empty with at most {MAX_OBSERVATION_LEN} values, got {:?}",
-                    self.spec.shape
-                ),
-            )
-        })?;
-        if self.spec.kind.is_empty() {
-            return Err(BatchError::new(
-                RejectReason::Spec,
-                "spec.kind",
-                "must not be empty",
-            ));
-        }
+        let obs_len = self
+            .layout
+            .check()
+            .map_err(|problem| BatchError::new(RejectReason::Spec, "layout", problem))?;
         if self.num_actions == 0 {
             return Err(BatchError::new(
                 RejectReason::Spec,
@@ -355,7 +295,7 @@ impl TransitionBatch {
                 BatchError::new(
                     reason,
                     format!("observations[{i}]"),
-                    format!("{e} (spec {})", self.spec),
+                    format!("{e} (layout {})", self.layout),
                 )
             })?;
         }
@@ -426,7 +366,7 @@ pub fn check_priorities(
 /// Why an input was rejected; the label of the rejection counters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum RejectReason {
-    /// Observation kind, shape or action count missing, or not the table's.
+    /// Observation layout or action count invalid, or not the table's.
     Spec,
     /// A batch without transitions.
     EmptyBatch,
@@ -444,7 +384,7 @@ pub enum RejectReason {
     NegativePriority,
     /// An observation index outside the pool.
     IndexRange,
-    /// An observation whose byte length does not match the spec.
+    /// An observation whose byte length does not match the layout.
     ObservationLength,
     /// Bad offsets, an unknown encoding, or sparse indices out of range or
     /// order.
@@ -550,7 +490,7 @@ mod tests {
 
     fn batch() -> TransitionBatch {
         let mut b = TransitionBatch::new(
-            ObservationSpec::new("toy", [2, 3]),
+            ObservationLayout::new("toy", 1, 2, 3, 0),
             4,
             ObservationEncoding::SparseF32,
         );
@@ -614,7 +554,7 @@ mod tests {
         }
         rejects(|b| b.columns.rewards.push(0.0), LengthMismatch, "rewards");
         rejects(
-            |b| b.spec.shape = vec![2, 2],
+            |b| b.layout.cols = 2,
             ObservationEncoding,
             "observations[0]",
         );
@@ -623,7 +563,8 @@ mod tests {
             b.observations = ObservationPool::from_parts(DenseF32, vec![0, 24], data);
         };
         rejects(dense_short, ObservationLength, "observations[1]");
-        rejects(|b| b.spec.shape = vec![], Spec, "spec.shape");
+        rejects(|b| b.layout.rows = 0, Spec, "layout");
+        rejects(|b| b.layout.kind.clear(), Spec, "layout");
     }
 
     #[test]
@@ -640,12 +581,19 @@ mod tests {
     }
 
     #[test]
-    fn spec_len_guards_overflow() {
-        assert_eq!(ObservationSpec::ttg().num_values(), Some(2344));
-        assert_eq!(
-            ObservationSpec::new("x", [u32::MAX, u32::MAX]).num_values(),
-            None
+    fn layout_len_guards_overflow() {
+        let huge = i64::from(u32::MAX);
+        rejects(
+            |b| b.layout = ObservationLayout::new("x", huge, huge, huge, 0),
+            RejectReason::Spec,
+            "layout",
         );
-        assert_eq!(ObservationSpec::new("x", [0]).num_values(), None);
+        let err = ValidBatch::new({
+            let mut b = batch();
+            b.layout.extra = -1;
+            b
+        })
+        .expect_err("negative extra");
+        assert!(err.problem.contains("toy [1x2x3 + -1]"), "{err}");
     }
 }

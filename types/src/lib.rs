@@ -3,7 +3,8 @@
 //!
 //! - [`batch`]: the [`TransitionBatch`] (struct-of-arrays n-step
 //!   transitions over an [`ObservationPool`] that holds each observation
-//!   once) and its validation, whose [`BatchError`] names the field; a
+//!   once, with the [`ObservationLayout`] they have) and its validation,
+//!   whose [`BatchError`] names the field; a
 //!   [`ValidBatch`] is a batch that passed it.
 //! - [`columns`]: [`Columns`], the six per-transition columns, written once
 //!   for batches, replay tables, their snapshots and samples.
@@ -39,15 +40,12 @@ pub mod tensors;
 pub mod weights;
 
 pub use batch::{
-    BatchError, ObservationPool, ObservationSpec, RejectReason, Transition, TransitionBatch,
-    ValidBatch,
+    BatchError, ObservationPool, RejectReason, Transition, TransitionBatch, ValidBatch,
 };
 pub use checkpoint::Manifest;
 pub use codec::ObservationEncoding;
 pub use columns::Columns;
 pub use sample::{PrioritiesUpdated, Sample};
-pub use spec::{
-    EGO_FEATURES, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
-};
+pub use spec::{NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of};
 pub use tensors::F32Tensor;
 pub use weights::{Weights, WeightsMeta};

@@ -2,11 +2,13 @@
 //! the shape of its trunk. A [`NetworkSpec`] travels with every copy of the
 //! weights, so weights are only ever applied to a network they fit.
 //!
-//! [`ObservationLayout::named`] knows the simulator's four views
-//! ([`ObservationLayout::KINDS`]). Neither this crate nor
-//! `crossroads_model` depends on the simulator, so a root test
-//! (`tests/it/learner.rs`) checks that the layouts match what
-//! `crossroads_sim` writes. Errors are a [`SpecError`].
+//! An [`ObservationLayout`] is plain data here: the simulator owns the
+//! views and their sizes (`crossroads_sim::observation_layout`), batches and
+//! networks carry the layout they were made for, and receivers compare
+//! layouts instead of keeping a copy of the sizes. Errors are a
+//! [`SpecError`].
+
+use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
@@ -23,18 +25,14 @@ pub enum SpecError {
     Format(String),
 }
 
-/// Dense features after the grid in every simulator observation (the ego's
-/// own state; `crossroads_sim::EGO_FEATURES`).
-pub const EGO_FEATURES: i64 = 4;
-
 /// How a flat observation is laid out: a channel-major grid
 /// `[channels][rows][cols]` followed by `extra` dense features, as the
-/// simulator writes it.
+/// simulator writes it (`crossroads_sim::ObsSpec::layout`). Weights files
+/// store it as JSON, so the field names are part of their format.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObservationLayout {
-    /// Simulator view: `ttg`, `ttg-occlusion`, `sequential` or
-    /// `sequential-occlusion`.
+    /// Simulator view, e.g. `ttg` (`crossroads_sim::OBSERVATION_KINDS`).
     pub kind: String,
     /// Grid channels.
     pub channels: i64,
@@ -47,35 +45,39 @@ pub struct ObservationLayout {
 }
 
 impl ObservationLayout {
-    /// The names [`ObservationLayout::named`] knows.
-    pub const KINDS: [&'static str; 4] =
-        ["ttg", "ttg-occlusion", "sequential", "sequential-occlusion"];
-
-    /// The layout of a simulator view: the TTG grid is 5 x 18 x 26
-    /// (occupied, heading, speed, x and y offset in the cell), the
-    /// Sequential grid 6 x 5 x 11 (plus time to collision); `-occlusion`
-    /// adds an occluded channel. Each is followed by [`EGO_FEATURES`]
-    /// values.
-    pub fn named(kind: &str) -> Result<Self, SpecError> {
-        let (channels, rows, cols) = match kind {
-            "ttg" => (5, 18, 26),
-            "ttg-occlusion" => (6, 18, 26),
-            "sequential" => (6, 5, 11),
-            "sequential-occlusion" => (7, 5, 11),
-            other => {
-                return Err(SpecError::Invalid(format!(
-                    "unknown observation kind {other:?}; expected one of {}",
-                    Self::KINDS.join(", ")
-                )));
-            }
-        };
-        Ok(Self {
-            kind: kind.to_owned(),
+    /// A layout of `kind`: a `channels x rows x cols` grid, then `extra`
+    /// dense values. Not checked here; see [`check`](Self::check).
+    pub fn new(kind: impl Into<String>, channels: i64, rows: i64, cols: i64, extra: i64) -> Self {
+        Self {
+            kind: kind.into(),
             channels,
             rows,
             cols,
-            extra: EGO_FEATURES,
-        })
+            extra,
+        }
+    }
+
+    /// What a replay file of an earlier build stood for: it kept only the
+    /// kind and the flat length, read as a `1 x 1 x len` grid (see
+    /// [`reads_as`](Self::reads_as)).
+    pub fn legacy(kind: impl Into<String>, len: i64) -> Self {
+        Self::new(kind, 1, 1, len, 0)
+    }
+
+    /// Whether this is a flat `1 x 1 x len` layout without extra values, as
+    /// [`legacy`](Self::legacy) makes.
+    pub fn is_legacy(&self) -> bool {
+        self.channels == 1 && self.rows == 1 && self.extra == 0
+    }
+
+    /// Whether observations stored under `self` read as observations of
+    /// `other`: the same layout, or `self` a legacy one
+    /// ([`legacy`](Self::legacy)) of the same kind and length.
+    pub fn reads_as(&self, other: &Self) -> bool {
+        self == other
+            || (self.is_legacy()
+                && self.kind == other.kind
+                && self.check().is_ok_and(|len| other.check() == Ok(len)))
     }
 
     /// Values in the grid part.
@@ -91,6 +93,39 @@ impl ObservationLayout {
     /// Whether an observation has no values (never for a valid layout).
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Checks that the kind is named, every grid dimension is positive,
+    /// `extra` is not negative and an observation has at most
+    /// [`MAX_OBSERVATION_LEN`] values (so [`len`](Self::len) cannot
+    /// overflow); returns that length.
+    pub fn check(&self) -> Result<usize, String> {
+        if self.kind.is_empty() {
+            return Err(format!("the observation kind must not be empty: {self}"));
+        }
+        if self.channels <= 0 || self.rows <= 0 || self.cols <= 0 || self.extra < 0 {
+            return Err(format!("observation dimensions must be positive: {self}"));
+        }
+        self.channels
+            .checked_mul(self.rows)
+            .and_then(|grid| grid.checked_mul(self.cols))
+            .and_then(|grid| grid.checked_add(self.extra))
+            .and_then(|len| usize::try_from(len).ok())
+            .filter(|len| *len <= MAX_OBSERVATION_LEN)
+            .ok_or_else(|| {
+                format!("an observation must have at most {MAX_OBSERVATION_LEN} values: {self}")
+            })
+    }
+}
+
+/// `kind [channels x rows x cols + extra]`, e.g. `ttg [5x18x26 + 4]`.
+impl fmt::Display for ObservationLayout {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} [{}x{}x{} + {}]",
+            self.kind, self.channels, self.rows, self.cols, self.extra
+        )
     }
 }
 
@@ -165,15 +200,15 @@ pub struct NetworkSpec {
 }
 
 impl NetworkSpec {
-    /// The spec for a simulator view and action set, checked.
+    /// The spec for an observation layout and action set, checked.
     pub fn new(
-        observation: &str,
+        observation: ObservationLayout,
         action_set: &str,
         trunk: TrunkKind,
         hidden: Vec<i64>,
     ) -> Result<Self, SpecError> {
         let spec = Self {
-            observation: ObservationLayout::named(observation)?,
+            observation,
             action_set: action_set.to_owned(),
             num_actions: num_actions_of(action_set)?,
             trunk,
@@ -183,26 +218,12 @@ impl NetworkSpec {
         Ok(spec)
     }
 
-    /// Checks that every dimension is positive and fits the trunk, and
-    /// that an observation has at most [`MAX_OBSERVATION_LEN`] values (so
-    /// [`input_len`](Self::input_len) cannot overflow).
+    /// Checks the observation layout ([`ObservationLayout::check`]: at most
+    /// [`MAX_OBSERVATION_LEN`] values, so [`input_len`](Self::input_len)
+    /// cannot overflow) and that every other dimension is positive and fits
+    /// the trunk.
     pub fn validate(&self) -> Result<(), SpecError> {
-        let o = &self.observation;
-        if o.channels <= 0 || o.rows <= 0 || o.cols <= 0 || o.extra < 0 {
-            return Err(SpecError::Invalid(format!(
-                "observation dimensions must be positive: {o:?}"
-            )));
-        }
-        let len = o
-            .channels
-            .checked_mul(o.rows)
-            .and_then(|grid| grid.checked_mul(o.cols))
-            .and_then(|grid| grid.checked_add(o.extra));
-        if len.is_none_or(|len| len > MAX_OBSERVATION_LEN as i64) {
-            return Err(SpecError::Invalid(format!(
-                "an observation must have at most {MAX_OBSERVATION_LEN} values: {o:?}"
-            )));
-        }
+        self.observation.check().map_err(SpecError::Invalid)?;
         if self.num_actions <= 0 {
             return Err(SpecError::Invalid(format!(
                 "num_actions must be positive, got {}",
@@ -234,13 +255,18 @@ impl NetworkSpec {
 mod tests {
     use super::*;
 
+    /// A small valid layout.
+    fn toy() -> ObservationLayout {
+        ObservationLayout::new("toy", 2, 3, 4, 1)
+    }
+
     /// `[channels, rows, cols]` come from the wire as u32, and their
     /// product overflowed i64 in `input_len` after `validate` had accepted
     /// them (the `wire_weights` fuzz target asserts that a valid spec has
     /// a length).
     #[test]
     fn an_observation_too_large_to_count_is_invalid() {
-        let mut spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![8]).expect("spec");
+        let mut spec = NetworkSpec::new(toy(), "ttg", TrunkKind::Mlp, vec![8]).expect("spec");
         spec.observation.channels = i64::from(u32::MAX);
         spec.observation.rows = i64::from(u32::MAX);
         spec.observation.cols = i64::from(u32::MAX);
@@ -254,5 +280,37 @@ mod tests {
         spec.observation.extra = 0;
         assert_eq!(spec.validate(), Ok(()));
         assert_eq!(spec.input_len(), 1 << 24);
+    }
+
+    #[test]
+    fn a_layout_is_checked_and_shown() {
+        assert_eq!(toy().check(), Ok(25));
+        assert_eq!(toy().to_string(), "toy [2x3x4 + 1]");
+        for bad in [
+            ObservationLayout::new("", 2, 3, 4, 1),
+            ObservationLayout::new("toy", 0, 3, 4, 1),
+            ObservationLayout::new("toy", 2, -3, 4, 1),
+            ObservationLayout::new("toy", 2, 3, 4, -1),
+        ] {
+            assert!(bad.check().is_err(), "{bad}");
+            let err = NetworkSpec::new(bad, "ttg", TrunkKind::Mlp, vec![8]).expect_err("invalid");
+            assert!(err.to_string().contains("observation"), "{err}");
+        }
+    }
+
+    /// Replay files of earlier builds kept only the kind and the flat
+    /// length; such a layout reads as any layout of that kind and length.
+    #[test]
+    fn a_legacy_layout_reads_as_one_of_its_kind_and_length() {
+        let legacy = ObservationLayout::legacy("toy", 25);
+        assert!(legacy.is_legacy() && !toy().is_legacy());
+        assert!(legacy.reads_as(&toy()));
+        assert!(toy().reads_as(&toy()));
+        assert!(
+            !toy().reads_as(&legacy),
+            "only the stored side may be legacy"
+        );
+        assert!(!ObservationLayout::legacy("toy", 24).reads_as(&toy()));
+        assert!(!ObservationLayout::legacy("other", 25).reads_as(&toy()));
     }
 }

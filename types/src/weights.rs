@@ -128,7 +128,7 @@ impl Weights {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::TrunkKind;
+    use crate::spec::{ObservationLayout, TrunkKind};
 
     fn file(metadata: &HashMap<String, String>) -> Vec<u8> {
         let bytes = [0u8; 8];
@@ -142,7 +142,13 @@ mod tests {
     fn metadata_round_trips_through_the_header() {
         let meta = WeightsMeta {
             version: 7,
-            spec: NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![16]).expect("spec"),
+            spec: NetworkSpec::new(
+                ObservationLayout::new("toy", 2, 3, 4, 1),
+                "ttg",
+                TrunkKind::Mlp,
+                vec![16],
+            )
+            .expect("spec"),
         };
         let bytes = file(&meta.to_metadata().expect("metadata"));
         assert_eq!(WeightsMeta::read(&bytes), Ok(meta.clone()));
@@ -165,7 +171,13 @@ mod tests {
         assert!(err.to_string().contains("not a safetensors file"), "{err}");
         let mut metadata = WeightsMeta {
             version: 1,
-            spec: NetworkSpec::new("sequential", "creep", TrunkKind::Mlp, vec![8]).expect("spec"),
+            spec: NetworkSpec::new(
+                ObservationLayout::new("toy", 1, 2, 2, 0),
+                "creep",
+                TrunkKind::Mlp,
+                vec![8],
+            )
+            .expect("spec"),
         }
         .to_metadata()
         .expect("metadata");

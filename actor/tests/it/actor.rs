@@ -19,7 +19,7 @@ fn training_fills_valid_batches_with_one_forward_pass_per_lane_and_step() {
         b.validate().expect("valid batch");
         assert_eq!(b.len(), 32);
         assert_eq!(b.num_actions, 5);
-        assert_eq!(b.spec.kind, "ttg");
+        assert_eq!(b.layout.kind, "ttg");
         assert!(b.observations.len() < 2 * b.len(), "observations shared");
         assert!(b.columns.discounts.iter().all(|d| *d == 0.0 || *d <= 0.99));
         assert!(
@@ -264,12 +264,9 @@ fn the_q_network_drives_actors_of_every_kind() {
         ("occluded-60", "creep", "ttg-occlusion"),
         ("occluded-60", "sequential", "sequential-occlusion"),
     ] {
-        let mut sim = SimConfig {
-            scenario: scenario.to_owned(),
-            action_set: action_set.to_owned(),
-            drivers: None,
-            observation: None,
-        };
+        let mut sim = SimConfig::default();
+        sim.scenario = scenario.to_owned();
+        sim.action_set = action_set.to_owned();
         crossroads_actor::resolve_observation(&mut sim).expect("resolves");
         assert_eq!(
             sim.observation(),
@@ -277,7 +274,13 @@ fn the_q_network_drives_actors_of_every_kind() {
             "{scenario} with {action_set}"
         );
         let (mut a, _) = actor_on(&sim, &actor_config(3, 16), 0);
-        let spec = NetworkSpec::new(kind, action_set, TrunkKind::Mlp, vec![32]).expect("spec");
+        let layout = sim.layout().expect("resolved").clone();
+        assert_eq!(
+            crossroads_sim::observation_layout(kind).expect("a view"),
+            layout
+        );
+        let spec =
+            NetworkSpec::new(layout.clone(), action_set, TrunkKind::Mlp, vec![32]).expect("spec");
         let mut net = QNetwork::new(spec, 7).expect("network");
         let mut got = Vec::new();
         for _ in 0..2_000 {
@@ -289,10 +292,26 @@ fn the_q_network_drives_actors_of_every_kind() {
         }
         let b = got.pop().unwrap_or_else(|| panic!("no batch for {kind}"));
         b.validate().expect("valid batch");
-        assert_eq!(b.spec.kind, kind);
+        assert_eq!(b.layout, layout);
         assert_eq!(b.num_actions as i64, net.spec().num_actions);
         assert!(b.columns.priorities.iter().all(|p| p.is_finite()), "{kind}");
     }
+}
+
+/// A stated observation the simulator has no view of is refused, naming
+/// the key and the views there are.
+#[test]
+fn an_unknown_observation_is_refused_naming_the_views() {
+    let mut sim = SimConfig::default();
+    sim.observation = Some("birdseye".to_owned());
+    let e = crossroads_actor::resolve_observation(&mut sim)
+        .expect_err("no such view")
+        .to_string();
+    assert!(
+        e.contains("sim.observation") && e.contains("birdseye") && e.contains("ttg-occlusion"),
+        "{e}"
+    );
+    assert_eq!(sim.layout(), None);
 }
 
 /// The share of exploring Creep episodes (epsilon 0.4) on occluded that
@@ -570,10 +589,8 @@ fn go_forks_label_the_go_a_waiting_network_never_takes() {
 fn go_forks_that_cannot_fork_are_refused_by_name() {
     let mut config = actor_config(4, 64);
     config.go_forks = 0.1;
-    let sequential = SimConfig {
-        action_set: "sequential".to_owned(),
-        ..SimConfig::default()
-    };
+    let mut sequential = SimConfig::default();
+    sequential.action_set = "sequential".to_owned();
     let e = ActorSettings::from_config(&sequential, &config, 0)
         .expect_err("sequential")
         .to_string();
@@ -598,10 +615,8 @@ fn a_shield_that_cannot_check_is_refused_by_name() {
         .to_string();
     assert!(e.contains("actor.shield") && e.contains("wings"), "{e}");
     config.shield = Some("default".to_owned());
-    let sequential = SimConfig {
-        action_set: "sequential".to_owned(),
-        ..SimConfig::default()
-    };
+    let mut sequential = SimConfig::default();
+    sequential.action_set = "sequential".to_owned();
     let e = ActorSettings::from_config(&sequential, &config, 0)
         .expect_err("sequential")
         .to_string();

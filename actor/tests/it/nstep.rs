@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use crossroads_actor::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
 use crossroads_types::codec::ObservationEncoding;
-use crossroads_types::{ObservationSpec, codec};
+use crossroads_types::{ObservationLayout, codec};
 
 fn obs(id: u64) -> ObsRef {
     let mut bytes = Vec::new();
@@ -170,7 +170,7 @@ fn a_batch_stores_each_observation_once() {
     }
     assert_eq!(out.len(), 6);
     let mut builder = BatchBuilder::new(
-        ObservationSpec::new("toy", [4]),
+        ObservationLayout::new("toy", 1, 2, 2, 0),
         4,
         ObservationEncoding::SparseF32,
     );

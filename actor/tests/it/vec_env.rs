@@ -74,8 +74,8 @@ fn observations_are_contiguous_and_encoded() {
     .expect("envs");
     let len = envs.obs_len();
     assert_eq!(envs.observations().len(), 3 * len);
-    assert_eq!(envs.batch_spec().kind, "ttg");
-    assert_eq!(envs.batch_spec().num_values(), Some(len));
+    assert_eq!(envs.layout().kind, "ttg");
+    assert_eq!(envs.layout().check(), Ok(len));
     let row1 = envs.observations()[len..2 * len].to_vec();
     let bytes = envs.take_encoded(1);
     let mut decoded = vec![0.0; len];

@@ -21,8 +21,13 @@ use crossroads_types::Weights;
 
 use crate::util::{actor_config, eventually, replay_config, transport, unique_prefix};
 
+/// The simulator's layout of view `kind`.
+fn layout(kind: &str) -> crossroads_types::ObservationLayout {
+    crossroads_sim::observation_layout(kind).expect("a view")
+}
+
 fn small_spec() -> NetworkSpec {
-    NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![32, 32]).expect("spec")
+    NetworkSpec::new(layout("ttg"), "ttg", TrunkKind::Mlp, vec![32, 32]).expect("spec")
 }
 
 /// A training actor on left with a small network following `slot`.
@@ -78,8 +83,8 @@ async fn a_running_actor_follows_a_real_learner_over_grpc_and_outlives_it() {
     let replay_url = format!("http://{}", replay.local_addr());
     config.transport = transport(&replay_url, "unused");
     config.learner.listen = ([127, 0, 0, 1], 0).into();
-    config.sim.observation = Some("ttg".to_owned());
     config.sim.action_set = "ttg".to_owned();
+    crossroads_actor::resolve_observation(&mut config.sim).expect("a built-in pairing");
     config.learner.hidden = vec![32, 32];
     config.learner.batch_size = 16;
     config.learner.publish_every = 10;
@@ -254,8 +259,8 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
     actor.step(&mut live).expect("first step");
     // A Sequential network (5x11x4 grid, 12 actions) cannot drive TTG
     // environments.
-    let other =
-        NetworkSpec::new("sequential", "sequential", TrunkKind::Mlp, vec![8]).expect("spec");
+    let other = NetworkSpec::new(layout("sequential"), "sequential", TrunkKind::Mlp, vec![8])
+        .expect("spec");
     let bytes = QNetwork::new(other, 3)
         .expect("network")
         .to_safetensors(4)
@@ -269,7 +274,7 @@ fn weights_for_other_environments_stop_the_actor_with_a_clear_error() {
 
     // Weights of another architecture for the same environments replace
     // the network; an older version offered later is ignored.
-    let wider = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![16]).expect("spec");
+    let wider = NetworkSpec::new(layout("ttg"), "ttg", TrunkKind::Mlp, vec![16]).expect("spec");
     let net = QNetwork::new(wider.clone(), 5).expect("network");
     let bytes = |version| net.to_safetensors(version).expect("bytes");
     assert!(slot.offer(Weights::from_safetensors(bytes(6), 60, 0).expect("weights")));
@@ -326,7 +331,7 @@ fn the_native_forward_pass_follows_each_version() {
     assert_eq!(live.version(), 3);
     assert!(live.is_native());
     let conv = QNetwork::new(
-        NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 16]).expect("spec"),
+        NetworkSpec::new(layout("ttg"), "ttg", TrunkKind::Conv, vec![4, 8, 16]).expect("spec"),
         4,
     )
     .expect("network");

@@ -12,7 +12,13 @@ use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
 use tch::Tensor;
 
 fn spec() -> NetworkSpec {
-    NetworkSpec::new("sequential", "ttg", TrunkKind::Mlp, vec![32, 16]).expect("test setup")
+    NetworkSpec::new(
+        crate::layout("sequential"),
+        "ttg",
+        TrunkKind::Mlp,
+        vec![32, 16],
+    )
+    .expect("test setup")
 }
 
 fn config(optimizer: OptimizerConfig) -> TrainerConfig {

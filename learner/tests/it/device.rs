@@ -28,11 +28,18 @@ const RMSPROP: OptimizerConfig = OptimizerConfig::Rmsprop {
 };
 
 fn mlp() -> NetworkSpec {
-    NetworkSpec::new("sequential", "ttg", TrunkKind::Mlp, vec![32, 16]).expect("test setup")
+    NetworkSpec::new(
+        crate::layout("sequential"),
+        "ttg",
+        TrunkKind::Mlp,
+        vec![32, 16],
+    )
+    .expect("test setup")
 }
 
 fn conv() -> NetworkSpec {
-    NetworkSpec::new("ttg", "ttg", TrunkKind::Conv, vec![4, 8, 32]).expect("test setup")
+    NetworkSpec::new(crate::layout("ttg"), "ttg", TrunkKind::Conv, vec![4, 8, 32])
+        .expect("test setup")
 }
 
 fn config(spec: NetworkSpec, optimizer: OptimizerConfig) -> TrainerConfig {
@@ -111,7 +118,7 @@ async fn cuda_without_cuda_stops_the_learner_at_start_naming_what_is_missing() {
     }
     let mut c = Config::default();
     c.learner.listen = ([127, 0, 0, 1], 0).into();
-    c.sim.observation = Some("sequential".to_owned());
+    crate::set_observation(&mut c.sim, "sequential");
     c.sim.action_set = "ttg".to_owned();
     c.learner.hidden = vec![32];
     c.learner.shm_publish = false;

@@ -9,8 +9,9 @@ mod python;
 mod server;
 mod training;
 
+use crossroads_config::SimConfig;
 use crossroads_model::{NetworkSpec, ObservationLayout, TrunkKind};
-use crossroads_types::{ObservationEncoding, ObservationSpec, TransitionBatch};
+use crossroads_types::{ObservationEncoding, TransitionBatch};
 
 /// A network over `n` one-hot states.
 pub fn toy_spec(n: i64, actions: i64, hidden: Vec<i64>) -> NetworkSpec {
@@ -32,8 +33,21 @@ pub fn toy_spec(n: i64, actions: i64, hidden: Vec<i64>) -> NetworkSpec {
 /// An empty batch of the toy network's observations.
 pub fn toy_batch(spec: &NetworkSpec) -> TransitionBatch {
     TransitionBatch::new(
-        ObservationSpec::new("toy", [spec.input_len() as u32]),
+        spec.observation.clone(),
         spec.num_actions as u32,
         ObservationEncoding::DenseF32,
     )
+}
+
+/// The simulator's layout of view `kind`.
+pub fn layout(kind: &str) -> ObservationLayout {
+    crossroads_sim::observation_layout(kind).expect("a view")
+}
+
+/// `sim` set to the simulator's view `kind`, as a role resolves it at
+/// start (`crossroads_actor::resolve_observation`, which the learner's
+/// tests do not link).
+pub fn set_observation(sim: &mut SimConfig, kind: &str) {
+    sim.observation = None;
+    sim.resolve_layout(layout(kind)).expect("a view");
 }

@@ -68,11 +68,8 @@ fn learner_weights_load_in_python_safetensors() {
         hidden: vec![8, 16, 64],
         ..Default::default()
     };
-    let sim = crossroads_config::SimConfig {
-        drivers: None,
-        observation: Some("ttg".to_owned()),
-        ..Default::default()
-    };
+    let mut sim = crossroads_config::SimConfig::default();
+    crate::set_observation(&mut sim, "ttg");
     let trainer = Trainer::new(TrainerConfig::from_config(&sim, &config).unwrap()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let store = CheckpointStore::open(dir.path(), 1, "success_rate").unwrap();

@@ -47,7 +47,7 @@ async fn replay_with_data(config: &Config) -> Replay {
 fn learner_config(checkpoints: &Path) -> Config {
     let mut c = Config::default();
     c.learner.listen = ([127, 0, 0, 1], 0).into();
-    c.sim.observation = Some("sequential".to_owned());
+    crate::set_observation(&mut c.sim, "sequential");
     c.sim.action_set = "ttg".to_owned();
     c.learner.hidden = vec![32, 32];
     c.learner.batch_size = 16;
@@ -290,7 +290,7 @@ async fn a_replay_of_another_observation_kind_stops_the_learner_with_a_clear_err
     let config = learner_config(&dir.path().join("ckpts"));
     let replay = replay_with_data(&config).await;
     let mut other = config.clone();
-    other.sim.observation = Some("ttg".to_owned());
+    crate::set_observation(&mut other.sim, "ttg");
     other.learner.resume = false;
     other.learner.checkpoint_dir = None;
     let learner = start_learner(&other, &replay, None).await;
@@ -315,7 +315,8 @@ fn weights_reach_a_late_shared_memory_subscriber() {
         ..Default::default()
     };
     let weights = |version: u64, hidden: i64| {
-        let spec = NetworkSpec::new("ttg", "ttg", TrunkKind::Mlp, vec![hidden]).unwrap();
+        let spec =
+            NetworkSpec::new(crate::layout("ttg"), "ttg", TrunkKind::Mlp, vec![hidden]).unwrap();
         let bytes = QNetwork::new(spec, 1)
             .unwrap()
             .to_safetensors(version)

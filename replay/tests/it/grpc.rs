@@ -125,10 +125,10 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
 
     let cases: Vec<(&str, Mutation, tonic::Code, &str, RejectReason)> = vec![
         (
-            "observation shape not the table's",
-            |b| b.spec.shape = vec![2, 3, 3],
+            "observation layout not the table's",
+            |b| b.layout.cols = 3,
             tonic::Code::InvalidArgument,
-            "spec",
+            "layout",
             RejectReason::Spec,
         ),
         (
@@ -174,7 +174,7 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
             "NaN observation value",
             |b| {
                 let mut fresh = TransitionBatch::new(
-                    b.spec.clone(),
+                    b.layout.clone(),
                     4,
                     crossroads_types::ObservationEncoding::DenseF32,
                 );
@@ -235,7 +235,7 @@ async fn every_bad_input_is_rejected_naming_the_field_and_changes_nothing() {
             |b| {
                 let v: Vec<f32> = (0..crate::util::SPEC_LEN).map(|i| i as f32 + 1.0).collect();
                 let mut big = TransitionBatch::new(
-                    b.spec.clone(),
+                    b.layout.clone(),
                     4,
                     crossroads_types::ObservationEncoding::DenseF32,
                 );

@@ -1,6 +1,7 @@
 //! Integration tests of crossroads-replay, one binary.
 
 mod grpc;
+mod legacy;
 mod rate_limiter;
 mod shm;
 mod snapshot;

@@ -54,7 +54,7 @@ fn publish_as_child(prefix: &str) {
     // A batch the table refuses (another observation kind) is answered with
     // its rejection, not silently dropped.
     let mut other = batch(50, 10, None);
-    other.spec.kind = "other".to_owned();
+    other.layout.kind = "other".to_owned();
     let other = ValidBatch::new(other).expect("valid, only not the table's");
     publisher.send(5, &other).expect("send");
     let acks = publisher.flush(Duration::from_secs(20)).expect("answered");

@@ -231,9 +231,9 @@ async fn an_image_no_valid_batch_could_make_is_refused_with_nothing_changed() {
         ("reward", |i| i.items.rewards[0] = f32::NAN),
         ("discount", |i| i.items.discounts[1] = 1.5),
         ("spec", |i| i.spec = None),
-        ("shape", |i| {
-            if let Some((spec, _)) = &mut i.spec {
-                spec.shape.clear();
+        ("layout", |i| {
+            if let Some((layout, _)) = &mut i.spec {
+                layout.rows = 0;
             }
         }),
         ("observation", |i| {

@@ -226,7 +226,7 @@ async fn a_batch_of_another_spec_is_rejected_and_changes_nothing() {
     insert(&t, 0, 3, None).await;
     let before = t.image();
     let mut other = util::batch(0, 2, None);
-    other.spec.kind = "sequential".to_owned();
+    other.layout.kind = "sequential".to_owned();
     let err = t
         .insert(
             &PreparedBatch::new(ValidBatch::new(other).expect("valid alone")),
@@ -237,7 +237,7 @@ async fn a_batch_of_another_spec_is_rejected_and_changes_nothing() {
         .expect_err("spec differs");
     match err {
         TableError::Invalid(e) => {
-            assert_eq!((e.reason, e.field.as_str()), (RejectReason::Spec, "spec"));
+            assert_eq!((e.reason, e.field.as_str()), (RejectReason::Spec, "layout"));
         }
         other => panic!("{other:?}"),
     }
@@ -268,7 +268,7 @@ async fn a_reserved_batch_is_sampled_only_once_stored_and_a_dropped_reservation_
     assert_eq!(t.stats().info.size, 0);
     // Its spec is the table's meanwhile: a batch of another is refused.
     let mut other = util::batch(0, 2, None);
-    other.spec.kind = "sequential".to_owned();
+    other.layout.kind = "sequential".to_owned();
     let other = PreparedBatch::new(ValidBatch::new(other).expect("valid alone"));
     assert!(matches!(t.reserve_now(&other), Err(TableError::Invalid(_))));
     // Dropped unstored (its record failed): the table is as it was, spec

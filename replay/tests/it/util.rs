@@ -8,13 +8,13 @@ use crossroads_config::WeightNormalization;
 use crossroads_replay::rate_limiter::RateLimiterConfig;
 use crossroads_replay::{PreparedBatch, Table, TableConfig, TableMetrics};
 use crossroads_types::{
-    ObservationEncoding, ObservationSpec, Transition, TransitionBatch, ValidBatch,
+    ObservationEncoding, ObservationLayout, Transition, TransitionBatch, ValidBatch,
 };
 
 pub const SPEC_LEN: usize = 2 * 3 * 2;
 
-pub fn spec() -> ObservationSpec {
-    ObservationSpec::new("toy", [2, 3, 2])
+pub fn layout() -> ObservationLayout {
+    ObservationLayout::new("toy", 2, 3, 2, 0)
 }
 
 pub fn table_config(capacity: usize, alpha: f64) -> TableConfig {
@@ -54,7 +54,7 @@ pub fn obs(tag: u32) -> Vec<f32> {
 /// tag % 4, priorities as given (or 1), next state shared with the next
 /// transition's state.
 pub fn batch(first: u32, n: u32, priorities: Option<&[f32]>) -> TransitionBatch {
-    let mut b = TransitionBatch::new(spec(), 4, ObservationEncoding::SparseF32);
+    let mut b = TransitionBatch::new(layout(), 4, ObservationEncoding::SparseF32);
     let mut current = b.push_observation(&obs(first));
     for i in 0..n {
         let tag = first + i;
