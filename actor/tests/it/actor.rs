@@ -585,15 +585,20 @@ fn go_forks_label_the_go_a_waiting_network_never_takes() {
     }
 }
 
+/// Why an actor of `config` with Sequential actions is refused.
+fn refusal_on_sequential(config: &ActorConfig) -> String {
+    let mut sequential = SimConfig::default();
+    sequential.action_set = "sequential".to_owned();
+    ActorSettings::from_config(&sequential, config, 0)
+        .expect_err("sequential")
+        .to_string()
+}
+
 #[test]
 fn go_forks_that_cannot_fork_are_refused_by_name() {
     let mut config = actor_config(4, 64);
     config.go_forks = 0.1;
-    let mut sequential = SimConfig::default();
-    sequential.action_set = "sequential".to_owned();
-    let e = ActorSettings::from_config(&sequential, &config, 0)
-        .expect_err("sequential")
-        .to_string();
+    let e = refusal_on_sequential(&config);
     assert!(
         e.contains("actor.go_forks") && e.contains("sequential"),
         "{e}"
@@ -615,11 +620,7 @@ fn a_shield_that_cannot_check_is_refused_by_name() {
         .to_string();
     assert!(e.contains("actor.shield") && e.contains("wings"), "{e}");
     config.shield = Some("default".to_owned());
-    let mut sequential = SimConfig::default();
-    sequential.action_set = "sequential".to_owned();
-    let e = ActorSettings::from_config(&sequential, &config, 0)
-        .expect_err("sequential")
-        .to_string();
+    let e = refusal_on_sequential(&config);
     assert!(
         e.contains("actor.shield") && e.contains("sequential"),
         "{e}"

@@ -8,17 +8,11 @@ use crossroads_learner::bench::{SplitMix, synthetic_batch};
 use crossroads_learner::checkpoint::{CheckpointStore, NewCheckpoint, StoreError, validate_id};
 use crossroads_learner::optimizer::OptimizerConfig;
 use crossroads_learner::{Trainer, TrainerConfig, TrainingBatch};
-use crossroads_model::{NetworkSpec, QNetwork, TrunkKind};
+use crossroads_model::{NetworkSpec, QNetwork};
 use tch::Tensor;
 
 fn spec() -> NetworkSpec {
-    NetworkSpec::new(
-        crate::layout("sequential"),
-        "ttg",
-        TrunkKind::Mlp,
-        vec![32, 16],
-    )
-    .expect("test setup")
+    crate::small_mlp()
 }
 
 fn config(optimizer: OptimizerConfig) -> TrainerConfig {

@@ -28,13 +28,7 @@ const RMSPROP: OptimizerConfig = OptimizerConfig::Rmsprop {
 };
 
 fn mlp() -> NetworkSpec {
-    NetworkSpec::new(
-        crate::layout("sequential"),
-        "ttg",
-        TrunkKind::Mlp,
-        vec![32, 16],
-    )
-    .expect("test setup")
+    crate::small_mlp()
 }
 
 fn conv() -> NetworkSpec {

@@ -40,6 +40,11 @@ pub fn toy_batch(spec: &NetworkSpec) -> TransitionBatch {
 }
 
 /// The simulator's layout of view `kind`.
+/// An MLP of 32 and 16 units on the Sequential view, scoring TTG actions.
+pub fn small_mlp() -> NetworkSpec {
+    NetworkSpec::new(layout("sequential"), "ttg", TrunkKind::Mlp, vec![32, 16]).expect("test setup")
+}
+
 pub fn layout(kind: &str) -> ObservationLayout {
     crossroads_sim::observation_layout(kind).expect("a view")
 }
