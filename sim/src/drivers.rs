@@ -4,16 +4,14 @@
 //! A scenario's `[traffic]` table gives every car the same driver; a
 //! [`DriverPopulation`] (a scenario's `[drivers]` table, or a preset by
 //! name) draws, per car, the seconds before he reacts to an ego coming at
-//! his lane, the braking he accepts to give way (comfortable) and the
-//! hardest he can apply (emergency), his time headway and his desired
-//! speed's spread and cap, and whether he notices the ego at all. Each
-//! bound is uniform between its two ends, so a population states its
-//! bounds plainly (what the shield may be asked to assume).
-//!
-//! Presets: `sumo`, the scenario's own drivers (SUMO's defaults, which the
-//! paper used: every driver reacts within one 0.2 s step and brakes up to
-//! 9 m/s² for an ego on the junction), and `human`, drivers as road-safety
-//! research measures them; docs/drivers.md cites each value.
+//! his lane (the rule of `sim/src/traffic.rs`), the braking he accepts to
+//! give way (comfortable) and the hardest he can apply (emergency), his
+//! time headway, his desired speed's spread and cap, and whether he
+//! notices the ego at all. Each bound is uniform between its two ends, so
+//! a population states its bounds plainly (what the shield may assume).
+//! [`PRESETS`]: `sumo`, the scenario's own drivers (SUMO's defaults, which
+//! the paper used), `human`, drivers as road-safety research measures them
+//! (docs/drivers.md cites each value), and `mixed`, half of each.
 //!
 //! Draws come from a random stream of their own, seeded from the episode's
 //! seed ([`Traffic::seed_drivers`](crate::Traffic::seed_drivers)): the same

@@ -1,10 +1,19 @@
 //! Bird's-eye grid observations: their geometry, channels, normalization and
-//! writing into caller-provided buffers. The layout is documented on the
-//! crate root.
+//! writing into caller-provided buffers.
+//!
+//! An observation is a flat `f32` vector of [`ObsSpec::len`] values: a
+//! channel-major grid `[channels][rows][cols]` ([`ObsSpec::index`]; the
+//! grids and channels of [`ObsKind`]) followed by [`EGO_FEATURES`] dense ego
+//! features. Cells without a car are 0 in every car channel, so grids are
+//! sparse. A car is written into the one cell that holds its centre; if two
+//! cars share a cell, the one written last (lanes in scenario order,
+//! downstream cars first) wins. Cars outside the grid, and cars in cells the
+//! sensor cannot see, are absent.
 //!
 //! The sizes are written here only: batches and networks carry them as a
 //! `crossroads_types::ObservationLayout` ([`ObsSpec::layout`],
-//! [`observation_layout`]).
+//! [`observation_layout`], which gives a view's layout by name,
+//! [`OBSERVATION_KINDS`], without building an environment).
 
 use crossroads_types::ObservationLayout;
 use serde::{Deserialize, Serialize};
@@ -33,16 +42,44 @@ pub const SEQ_COLS: usize = 11;
 pub const SEQ_CELL_FWD: f64 = 4.0;
 /// Half the lateral span of the Sequential grid, m.
 pub const SEQ_HALF_LAT: f64 = 90.0;
-/// Number of ego features after the grid.
+/// Number of ego features after the grid: speed / speed limit; progress
+/// from the stop line to the goal in [0, 1]; 1 once *go* was chosen; steps
+/// taken / step limit.
 pub const EGO_FEATURES: usize = 4;
 
-/// Which grid an environment writes.
+/// Which grid an environment writes. Each grid's car channels are followed
+/// by the occluded channel, when there is one ([`ObsSpec::occlusion`]), and
+/// by the car's two offsets from its cell's centre.
+///
+/// The occupancy channel and the offsets are our additions to the paper's
+/// channels. Occupancy, so that a stopped car is never all zeros. The
+/// offsets (the paper gives them to its occlusion networks only) because a
+/// TTG cell is 8 m long, 0.4 s at the speed limit: without them gaps within
+/// that much of each other look the same (what they changed in training:
+/// reports/paper/NOTES.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ObsKind {
-    /// 18 x 26 world-aligned grid around the intersection.
+    /// 18 x 26 grid fixed in the world: x from -104 to 104 m in 26 columns
+    /// of 8 m (column 0 west), y from 18 to -18 m in 18 rows of 2 m (row 0
+    /// north). Channels, without occlusion:
+    ///
+    /// | channel | value |
+    /// | --- | --- |
+    /// | 0 occupied | 1 |
+    /// | 1 heading | heading / pi, in (-1, 1] (east 0, north 0.5, west 1) |
+    /// | 2 speed | speed / scenario speed limit (20 m/s), about 0 to 1.3 |
+    /// | 3 x offset | of the car's centre from its cell's centre, in cells, in [-0.5, 0.5) (east) |
+    /// | 4 y offset | the same along y (north) |
     Ttg,
-    /// 5 x 11 grid in the ego's frame, with a time-to-collision channel.
+    /// 5 x 11 grid in the ego's frame from its sensor point (the middle of
+    /// its front bumper): 5 rows of 4 m from 0 to 20 m ahead (row 0
+    /// nearest), 11 columns of 180/11 m from 90 m left to 90 m right
+    /// (column 0 leftmost). Channels: 0 occupied, 1 heading relative to the
+    /// ego's / pi, 2 speed / speed limit, 3 time to collision
+    /// ([`Env::car_ttc`]) / 10 s, capped at 1 (1 also for cars that will not
+    /// meet the ego's path), then the car's x offset (ahead) and y offset
+    /// (left) from its cell's centre in cells, in [-0.5, 0.5).
     Sequential,
 }
 
@@ -60,8 +97,11 @@ pub struct ObsSpec {
     pub cols: usize,
     /// Trailing dense ego features.
     pub ego_features: usize,
-    /// Whether there is an occluded channel (before the two offsets, which
-    /// are always the last two).
+    /// Whether there is an occluded channel, when the scenario has
+    /// occluders: 1 when the straight line from the sensor to the cell's
+    /// centre crosses an occluder. It comes right after the car channels,
+    /// before the two offsets (always the last two), as the paper lists the
+    /// occlusion channels (occluded, x offset, y offset).
     pub occlusion: bool,
 }
 

@@ -3,82 +3,17 @@
 //! and of a *phantom* car wherever a lane leaves what the ego can see, and
 //! vetoes the *go* when any of them could come too close.
 //!
-//! # What the shield may know
-//!
-//! Only what a car's own sensors and map give it, stated as a sensor
-//! model ([`sense`]): the map (lanes, the ego's route and its conflict
-//! zones, the speed limits), the ego's own state and dynamics, and the
-//! cars of the observation: a car is sensed when its centre lies on the
-//! TTG grid (104 m either side of the junction) in a cell the sensor sees,
-//! with its lane, position and speed (what the grid's occupancy, offset,
-//! heading and speed channels hold); `range_m` states a longer-range
-//! sensor instead. It never reads a car the observation
-//! leaves out, a driver's desired speed, or the random stream, and it never
-//! forks the simulator.
-//!
-//! # What it assumes
-//!
-//! [`ShieldParams`] states it (the defaults were tuned on seed 3 of Left,
-//! Right, Left2 and `occluded-30`; `eval --shield` reports on others).
-//! A sensed car may accelerate (at traffic's
-//! acceleration) up to `speed_factor` times its lane's limit, or keep
-//! going at `slow_factor` of its speed and brake for a slower car ahead
-//! of it with up to `leader_decel` (0 by default; a population's bounds
-//! set it, [`ShieldParams::assuming`]). Every lane that meets the ego's
-//! route also carries a phantom car at `phantom_factor` times the limit
-//! (1.2, as fast as a sensed car may get) at the first point, walking
-//! upstream from the ego's path, that the ego cannot see: an occluder's
-//! shadow, or the edge of the grid. A phantom stands for every car the
-//! unseen stretch may hold: the fastest coming from its edge, the slowest
-//! standing there, so the ego never goes behind one (a car unseen a few
-//! metres behind it would meet the ego). It never brakes for its own
-//! reasons; where drivers react to the ego it gives way by the same rule
-//! as a sensed driver (below), where they do not it drives on.
-//!
-//! Where the scenario's drivers react to the ego
-//! ([`crate::ScenarioSpec::traffic_reacts`]; the occlusion family's do
-//! not), the shield counts on what those drivers are stated to do once the
-//! ego is on the junction (SUMO's junction model: a driver brakes for a
-//! junction leader as hard as he must, up to the emergency deceleration of
-//! 9 m/s²), and on nothing more: a driver on a lane the ego crosses who
-//! would, by the drivers' rule, judge himself in the ego's way once he
-//! notices it (`reaction_s` after it comes within the traffic's
-//! `yield_horizon_s` of his lane) and could then stop short of its path
-//! braking at most `yield_decel` gives way; the shield counts on that only
-//! where it holds however he drives until then (keeping his speed, or
-//! speeding up from any moment to the fastest a car may drive), and
-//! otherwise needs him to pass clear ([`Yielder`]; a driver who can give
-//! way is not one who will: one who judges he arrives after the ego drives
-//! on, and may find too late that he cannot stop). A driver coming up a
-//! lane the ego turns into, unless surely ahead of it, must stay behind
-//! it however he drives until he notices it; then by the same rule he
-//! gives way before its entry only if he judges himself in its way, and
-//! follows it once it is in his lane, each as his car-following model
-//! bids (the improved IDM: gently while the ego is far ahead), braking at
-//! most `fall_in_decel` ([`Yielder::follower_meets`]). A driver short of
-//! the lane may also brake as hard as a car can (`hard_decel`) and stop in its way,
-//! unless he passes the ego's entry point `clear_s` before the ego can
-//! reach it (then he has no cause to brake). The ego must be safe whether
-//! such a driver passes or stops. Where drivers do not react, a follower
-//! only brakes once the ego is a car length into his lane (the simulator's
-//! drivers follow any leader from then on) and `reaction_s` has passed,
-//! at `follower_decel`. `yield_decel 4.5` (a comfortable braking, as
-//! SUMO's `decel`) gives a shield that does not make anyone brake hard
-//! for the ego, and is slower.
-
-//! # The check
-//!
-//! [`check_go`] rolls the ego forward under *go* (full acceleration along
-//! the route's speed caps, the simulator's own ego dynamics) step by step
-//! to the goal. While the ego's front is inside a lane's conflict zone its
-//! footprint, projected onto the lane, must stay `gap_m` clear of every
-//! car's predicted extent: on a crossed lane the band between the car's
-//! slowest and fastest prediction, each widened by `margin_s` of its
-//! speed; on a lane the ego merges into, a car must be clearly ahead (its
-//! slowest rear beyond the ego) or clearly behind (its fastest front short
-//! of the ego) when the ego enters, and stay so, a follower braking as
-//! assumed with its front `margin_s` of its speed further on. The first
-//! violation is the veto's [`Threat`].
+//! It knows only what a car's own sensors and map give it ([`sense`]): the
+//! map (lanes, the ego's route and its conflict zones, the speed limits),
+//! the ego's own state and dynamics, and the lane, position and speed of
+//! each car of the observation. It never reads a car the observation leaves
+//! out, a driver's desired speed or the random stream, and it never forks
+//! the simulator. [`ShieldParams`] states what it assumes of the cars,
+//! phantoms included ([`SensedCar::phantom`]). Where the scenario's drivers
+//! react to the ego it counts on their rule (`sim/src/traffic.rs`) only
+//! where it holds however a driver drives until he notices the ego
+//! (`Yielder`). [`check_go`] rolls *go* forward and names the first
+//! [`Threat`]. For users: docs/evaluation.md, "The safety shield".
 
 use serde::Serialize;
 
@@ -91,13 +26,21 @@ use crate::observation::{GridGeometry, ObsKind};
 use crate::scenario::ego_rect;
 
 /// What the shield assumes about the cars it senses and those it cannot.
+/// The defaults were tuned on seed 3 of Left, Right, Left2 and
+/// `occluded-30` (`eval --shield` reports on others). Where the scenario's
+/// drivers react to the ego ([`crate::ScenarioSpec::traffic_reacts`]; the
+/// occlusion family's do not), it counts on what those drivers are stated
+/// to do once the ego is on the junction (SUMO's junction model: a driver
+/// brakes for a junction leader as hard as he must, up to the emergency
+/// deceleration of 9 m/s²), and on nothing more.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ShieldParams {
     /// Fastest a sensed car drives, as a multiple of its lane's speed
-    /// limit: it may accelerate up to it (or keep a higher speed it already
-    /// has). The default, 1.2, is two standard deviations of the drivers'
-    /// stated speed factor (SUMO's `speedDev` 0.1 about 1): a driver at 1.1
-    /// times the limit may well still be speeding up.
+    /// limit: it may accelerate (at traffic's acceleration) up to it (or
+    /// keep a higher speed it already has). The default, 1.2, is two
+    /// standard deviations of the drivers' stated speed factor (SUMO's
+    /// `speedDev` 0.1 about 1): a driver at 1.1 times the limit may well
+    /// still be speeding up.
     pub speed_factor: f64,
     /// Speed of a phantom, as a multiple of its lane's speed limit: a
     /// hidden driver may be as fast as a sensed one (`speed_factor`). At
@@ -105,7 +48,8 @@ pub struct ShieldParams {
     /// turned in ahead of him (`ttc-creep:0` behind the shield, occluded-30
     /// seed 3 trial 6831).
     pub phantom_factor: f64,
-    /// Slowest a sensed car drives, as a fraction of its present speed.
+    /// Slowest a sensed car drives, as a fraction of its present speed
+    /// (then braking for a slower car ahead with up to `leader_decel`).
     pub slow_factor: f64,
     /// Seconds of a car's speed added either side of its predicted extent
     /// on a lane the ego crosses, and ahead of a car that follows the ego
@@ -129,7 +73,9 @@ pub struct ShieldParams {
     /// (m/s²) after `reaction_s` gives way. The
     /// default, 9, is what the scenarios' drivers do for an ego on the
     /// junction (SUMO's emergency deceleration); 4.5 counts only on
-    /// comfortable braking. 0 trusts no driver to brake for the ego.
+    /// comfortable braking (as SUMO's `decel`): a shield that makes no one
+    /// brake hard for the ego, and is slower. 0 trusts no driver to brake
+    /// for the ego.
     pub yield_decel: f64,
     /// Where the scenario's drivers react to the ego: the hardest braking,
     /// m/s², of a driver coming up a lane the ego turns into who falls in
@@ -140,7 +86,8 @@ pub struct ShieldParams {
     /// Seconds by which a driver on a lane the ego turns into must pass
     /// the ego's entry point (at `slow_factor` of his speed) before the
     /// ego can reach it, for the shield to count on him not braking for
-    /// the ego.
+    /// the ego. Short of that he may pass, or brake as hard as a car can
+    /// (`hard_decel`) and stop in its way; the ego must be safe either way.
     pub clear_s: f64,
     /// Hardest braking of a car, m/s²: where drivers react to the ego,
     /// the slowest a sensed car may drive is braking this hard from *go*
@@ -319,7 +266,15 @@ pub struct SensedCar {
     pub s: f64,
     /// Speed, m/s.
     pub v: f64,
-    /// A car the shield assumes where it cannot see, not one it sensed.
+    /// A car the shield assumes where it cannot see, not one it sensed: at
+    /// `phantom_factor` times its lane's limit, at the first point, walking
+    /// upstream from the ego's path, that the ego cannot see (an occluder's
+    /// shadow, or the edge of what it senses). A phantom stands for every
+    /// car the unseen stretch may hold: the fastest coming from its edge,
+    /// the slowest standing there, so the ego never goes behind one (a car
+    /// unseen a few metres behind it would meet the ego). It never brakes
+    /// for its own reasons; where drivers react to the ego it gives way by
+    /// the same rule as a sensed driver, where they do not it drives on.
     pub phantom: bool,
 }
 
@@ -360,9 +315,10 @@ pub struct Threat {
 /// The sensor model: the cars of `env`'s TTG-grid observation (centre on
 /// the grid, in a cell the sensor sees; with `range_m`, within that range
 /// of the junction's centre and in the sensor's line of sight) on lanes
-/// that meet the ego's route, then one phantom per such lane where the
-/// view upstream of the ego's path ends. Appends to `out` (cleared
-/// first).
+/// that meet the ego's route, each with its lane, position and speed (what
+/// the grid's occupancy, offset, heading and speed channels hold), then
+/// one phantom per such lane where the view upstream of the ego's path
+/// ends. Appends to `out` (cleared first).
 pub fn sense(env: &Env, params: &ShieldParams, out: &mut Vec<SensedCar>) {
     out.clear();
     let sc = env.scenario();
@@ -430,18 +386,14 @@ struct EgoStep {
     rect: OrientedRect,
 }
 
-/// The rule by which a driver on a lane the ego crosses gives way, as the
-/// simulator's drivers follow it (`traffic::react`) from the moment they
-/// notice an ego coming: a driver gives way when, at his present speed, he
-/// would neither clear the ego's path before the ego enters nor arrive
-/// after it is out (`yield_margin_s` either side), and he can stop short
-/// of the path; he then brakes just enough to arrive after it. He judges
+/// A driver on a lane the ego crosses, giving way by the drivers' rule
+/// (`sim/src/traffic.rs`) from the moment he notices the ego. He judges
 /// again at every step until he gives way: one who arrives after the ego
 /// drives on (and may speed up, and judge again), one who cannot stop
-/// passes first.
+/// passes first; a driver who can give way is not one who will.
 ///
-/// The shield counts on this only where it holds for every way the driver
-/// may drive until he gives way: keeping his speed (or `slow_factor` of
+/// The shield counts on his giving way only where it holds for every way
+/// he may drive until he gives way: keeping his speed (or `slow_factor` of
 /// it) and from any step on speeding up at traffic's acceleration to the
 /// fastest a car may drive, noticing the ego `reaction_s` after it comes
 /// within `yield_horizon_s` of his lane, able to stop with `yield_decel`.
@@ -561,13 +513,14 @@ impl<'a> Yielder<'a> {
     /// footprint, seconds after *go*: `None` where he cannot, for every
     /// speed of `speeds` he may have now and every drive until he notices
     /// the ego (keeping it, or speeding up from any step on to `v_max`).
-    /// Once he notices it he follows the drivers' rule: he gives way before
-    /// the ego is in only if he judges himself in its way (he would
-    /// neither clear its entry first nor arrive after it is a car length
-    /// in), and then follows the entry as his leader; once the ego is in
-    /// his lane he follows it; each as his car-following model bids (the
-    /// improved IDM at the scenario's headway, wanting `v_max`), braking
-    /// at most `fall_in_decel`.
+    /// Once he notices it he follows the drivers' rule
+    /// (`sim/src/traffic.rs`), modelled here: he gives way before the ego is
+    /// in only if he judges himself in its way (he would neither clear its
+    /// entry first nor arrive after it is a car length in), and then
+    /// follows the entry as his leader; once the ego is in his lane he
+    /// follows it; each as his car-following model bids (the improved IDM
+    /// at the scenario's headway, wanting `v_max`), braking at most
+    /// `fall_in_decel`.
     fn follower_meets(
         &self,
         s: f64,
@@ -684,6 +637,17 @@ const SLOWING_STEP: f64 = 0.25;
 
 /// Whether *go* now is safe against `cars` ([`sense`]) under `params`:
 /// `None` when it is, else the first threat found.
+///
+/// It rolls the ego forward under *go* (full acceleration along the
+/// route's speed caps, the simulator's own ego dynamics) step by step to
+/// the goal. While the ego's front is inside a lane's conflict zone its
+/// footprint, projected onto the lane, must stay `gap_m` clear of every
+/// car's predicted extent: on a crossed lane the band between the car's
+/// slowest and fastest prediction, each widened by `margin_s` of its
+/// speed; on a lane the ego merges into, a car must be clearly ahead (its
+/// slowest rear beyond the ego) or clearly behind (its fastest front short
+/// of the ego) when the ego enters, and stay so, a follower braking as
+/// assumed with its front `margin_s` of its speed further on.
 pub fn check_go(env: &Env, cars: &[SensedCar], params: &ShieldParams) -> Option<Threat> {
     let sc = env.scenario();
     let spec = sc.spec();

@@ -1,6 +1,22 @@
 //! Traffic on the priority road: emission, improved-IDM car following with
-//! Krauss's free-road acceleration, safety and dawdling, and the reaction
-//! of drivers to the ego.
+//! Krauss's free-road acceleration, safety and dawdling, and the drivers'
+//! reaction to the ego, whose rule is stated here and nowhere else.
+//!
+//! Priority drivers never give way in advance. A lane's drivers take the
+//! ego as coming once it has chosen *go*, cannot stop short of their lane,
+//! or drives at it faster than a creep and is about to enter (the
+//! environment fills each lane's [`EgoFoe`]); each reacts once his reaction
+//! time has passed (`reaction_delay_s`, 0.2 s: one step, as in SUMO), an
+//! inattentive one only to an ego merged into his lane ahead of him. Only a
+//! car in the ego's way reacts: one that would neither clear its path before
+//! it enters nor arrive after it is out (`yield_margin_s`, 0.5 s, either
+//! side) and could still stop short of it (one that cannot passes first,
+//! except behind an ego merging ahead). It slows just enough to pass behind
+//! it ([`give_way_decel`]), by at most `yield_decel` (4.5 m/s²; needing
+//! more, it drives on) while the ego is behind its stop line, by up to
+//! `emergency_decel` (9 m/s²) once the ego is on the junction, as SUMO's
+//! drivers brake for a junction leader. An ego merging ahead is followed as
+//! a leader; without `traffic_reacts` (occlusion) only once a car length in.
 
 use std::collections::VecDeque;
 
@@ -428,21 +444,14 @@ fn brake_light(v: f64, v_new: f64, dt: f64) -> bool {
     v_new < v - (0.05 + 0.005 * v) * v * dt || v_new <= 0.1
 }
 
-/// Acceleration bound of a car that knows about the ego (`INFINITY` for
-/// none). A car in the way of the ego's passage through its lane, which
-/// would neither be clear before the ego enters nor arrive after it is out
-/// (with `yield_margin_s` either side), slows just enough to arrive after
-/// the ego, stopping short of the lane if need be, unless it could not stop
-/// short even with `emergency_decel` and the ego crosses its lane (then it
-/// passes first; behind an ego merging ahead it brakes). Once the ego is on the
-/// junction (past its stop line or gone) it brakes for that as hard as it
-/// must, up to `emergency_decel`, as SUMO's drivers do for a junction
-/// leader (planned with `decel`, finalized down to the emergency
-/// deceleration); before, it gives way only with at most `yield_decel`,
-/// and drives on otherwise. A car giving way to an ego about to merge
-/// ahead of it follows it as a leader at its entry, bounded the same way.
-/// Once in a merge lane, the ego is followed like any leader. `a_free` is
-/// the car's free-road acceleration.
+/// Acceleration bound of a car that has noticed the ego (`INFINITY` for
+/// none), by the rule of the module doc; `a_free` is the car's free-road
+/// acceleration. Whether it could stop short is judged with
+/// `emergency_decel`; braking for an ego on the junction is planned with
+/// `decel` and finalized down to the emergency deceleration, as SUMO's is.
+/// A car giving way to an ego about to merge ahead of it follows it as a
+/// leader at its entry, bounded the same way; once the ego is in the merge
+/// lane it is followed like any leader.
 fn react(car: &mut Car, a_free: f64, c: &EgoConflict, p: &TrafficParams) -> f64 {
     let (v, v0) = (car.v, car.v_desired);
     let follow = |gap: f64| iidm_accel_with(a_free, v, v0, gap, c.v, p);
