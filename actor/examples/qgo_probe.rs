@@ -1,39 +1,22 @@
 //! Q(go) diagnosed before it is tuned: given the answer, can the network
-//! tell a safe moment to go from a doomed one?
+//! tell a safe moment to go from a doomed one? Creep networks undervalue
+//! *go* where going is safe (`eval --risk 16 --missed`: medians of -2.5 to
+//! -4 for an outcome worth about +1): too thin a learning signal (*data*),
+//! or an observation without what separates the two (*features*)?
 //!
-//! Every creep network undervalues *go* where going is safe (`crossroads
-//! eval --risk 16 --missed`: Q(go) medians of -2.5 to -4 at waits where
-//! going reached the goal in all 16 futures, for an outcome worth about
-//! +1). Either the learning signal is too thin (safe *go*s at a clear view
-//! are rare in the replay: data), or the observation does not hold what
-//! separates them (features). This probe tells which:
-//!
-//! 1. It drives `--episodes` episodes of `--scenario` with the network of
-//!    `--policy` (greedy, as `eval` does) and, at every `--every`-th
-//!    decision before a *go*, forks the environment `--futures` times (the same present,
-//!    hidden cars included, other random traffic from then on) and goes in
-//!    each: the mean discounted return of those *go*s is the label, the
-//!    value of *go* there under the true dynamics. A state is *safe* when
-//!    every fork reached the goal, *doomed* when more than half collided.
-//! 2. It trains a fresh network of the same shape (same trunk, same
-//!    observation) to regress its Q(go) on the labels of four fifths of the
-//!    episodes, with Adam, for `--updates` batches of `--batch`.
-//! 3. On the held-out fifth it compares the regression's Q(go) and the RL
-//!    network's with the labels: their medians at safe states (in view of
-//!    the conflicting lanes, as `--missed` counts them) and at doomed ones,
-//!    and how well each ranks safe above doomed (AUC).
-//!
-//! The verdict, fixed before the first run: **features** when the
-//! regression's AUC of safe over doomed is below 0.9, or its median Q(go)
-//! at held-out safe states in view is more than 1 below their median
-//! label (the observation cannot carry what the labels know); **data**
-//! when it reaches both while the RL network does not (the shape can learn
-//! it, the replay did not teach it).
-//!
-//! ```text
-//! cargo run --release -p crossroads-actor --example qgo_probe -- \
-//!     --policy reports/paper/runs/creep-occluded/best --episodes 2000
-//! ```
+//! It drives `--episodes` greedy episodes of `--scenario` with `--policy`'s
+//! network and labels every `--every`-th decision before a *go* with the
+//! mean discounted return of going in `--futures` forks (the present,
+//! hidden cars included, then other random traffic): *safe* when every fork
+//! reached the goal, *doomed* when more than half collided. A fresh network
+//! of the same shape regresses Q(go) on four fifths of the episodes (Adam,
+//! `--updates` batches of `--batch`); on the rest it and the RL network are
+//! compared with the labels (medians at safe states in view and at doomed
+//! ones, AUC of safe over doomed). The verdict, fixed before the first run:
+//! *features* when the regression's AUC is below 0.9 or its median at safe
+//! states in view is more than 1 below their median label; *data* when it
+//! reaches both while the RL network does not. Result and commands:
+//! reports/occlusion-ladder/README.md, "Q(go) diagnosed: data, not features".
 
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -6,25 +6,17 @@
 //! per environment an [`NStepAssembler`]. Each [`Actor::step`] makes one
 //! batched call of an [`ActionValues`] (the Q-network, supplied by the
 //! caller so it can swap weights between steps), chooses actions with
-//! [`EpsilonGreedy`] (epsilon per environment from the Ape-X [`Ladder`] over
-//! every environment of every actor, an absorbing *go* explored once per
-//! episode, or greedy in evaluation [`Mode`]), steps the environments and
-//! assembles n-step transitions over k-step actions (windows cut before an
-//! exploratory action) with initial priorities from its own Q estimates; a [`BatchBuilder`] packs them into
-//! [`TransitionBatch`](crossroads_types::TransitionBatch)es.
+//! [`EpsilonGreedy`] (epsilon per environment from the Ape-X [`Ladder`], or
+//! greedy in evaluation [`Mode`]), steps the environments and assembles
+//! transitions with initial priorities; a [`BatchBuilder`] packs them.
 //! [`Actor::run`] is the acting loop. A [`Pusher`] delivers batches over
-//! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`] (oldest
-//! dropped first), retrying with backoff and reconnecting.
-//! [`EpisodeStats`] sums episode ends for evaluation reports;
-//! [`ActorMetrics`] are the `crossroads_actor_*` metrics. A
-//! [`WeightsSubscription`] receives the learner's weights (gRPC stream or
-//! iceoryx2) into a `crossroads_transport::WeightsSlot`; a [`LiveNetwork`]
-//! applies the newest between steps. [`start`] / [`run`] put it all
-//! together for one actor process under one shutdown signal
-//! ([`ActorParts`] is the actor it assembles, for benches).
-//! Configuration: the `[actor]` section
-//! ([`crossroads_config::ActorConfig`]) through
-//! [`ActorSettings::from_config`] and [`resolve_index`].
+//! gRPC or iceoryx2 ([`PushConfig`]) from a bounded [`PushBuffer`], retrying
+//! with backoff. A [`WeightsSubscription`] receives the learner's weights; a
+//! [`LiveNetwork`] applies the newest between steps. [`EpisodeStats`] sums
+//! episode ends, [`ActorMetrics`] are the `crossroads_actor_*` metrics, and
+//! [`start`] / [`run`] assemble one actor process under one shutdown signal
+//! ([`ActorParts`], for benches), configured by the `[actor]` section
+//! ([`ActorSettings::from_config`], [`resolve_index`]).
 
 mod actor;
 mod buffer;

@@ -1,26 +1,8 @@
-//! The `crossroads_actor_*` metrics.
-//!
-//! | name | type | labels | meaning |
-//! | --- | --- | --- | --- |
-//! | `crossroads_actor_env_steps_total` | counter | scenario | simulation steps (0.2 s each) |
-//! | `crossroads_actor_decisions_total` | counter | scenario | actions taken (semi-MDP transitions) |
-//! | `crossroads_actor_episodes_total` | counter | scenario, mode, outcome | episodes ended (`mode` is `train` or `eval`) |
-//! | `crossroads_actor_episode_duration_seconds` | histogram | scenario, mode, outcome | simulated time of an episode |
-//! | `crossroads_actor_episode_brake_seconds` | histogram | scenario, mode | braking time of traffic per episode |
-//! | `crossroads_actor_transitions_assembled_total` | counter | | n-step transitions assembled |
-//! | `crossroads_actor_shield_vetoes_total` | counter | | *go*s the shield in the loop vetoed (`actor.shield`) |
-//! | `crossroads_actor_go_forks_total` | counter | | counterfactual *go*s run in forks and stored (`actor.go_forks`) |
-//! | `crossroads_actor_transitions_pushed_total` | counter | transport | transitions the replay acknowledged |
-//! | `crossroads_actor_transitions_dropped_total` | counter | reason | `buffer_full` (oldest dropped while the replay was unreachable) or `rejected` (refused by the replay) |
-//! | `crossroads_actor_push_buffer_batches` | gauge | | batches waiting to be sent |
-//! | `crossroads_actor_push_retries_total` | counter | transport | failed sends or connections, each followed by a backoff |
-//! | `crossroads_actor_push_latency_seconds` | histogram | transport | from sending a batch to its acknowledgement |
-//! | `crossroads_actor_weights_version` | gauge | | version of the weights in use |
-//! | `crossroads_actor_weights_staleness_seconds` | gauge | | age of the weights in use |
-//! | `crossroads_actor_forward_passes_total` | counter | | batched forward passes of the network (one per vectorized step) |
-//! | `crossroads_actor_inference_seconds_total` | counter | | time in those forward passes |
-//! | `crossroads_actor_backpressure_seconds_total` | counter | | time the acting loop waited for a live replay that was behind (its rate limiter) |
-//! | `crossroads_actor_epsilon` | gauge | | mean exploration epsilon over the environments (0 when greedy) |
+//! The `crossroads_actor_*` metrics: each is registered in
+//! [`ActorMetrics::new`] with its labels (`scenario`, `mode`, `outcome`,
+//! `transport` or `reason` where it has them) and a help text that says
+//! what it counts. docs/roles.md, "Metrics of each role", lists them for
+//! readers.
 
 use prometheus::{
     Counter, Gauge, HistogramOpts, HistogramVec, IntCounter, IntCounterVec, IntGauge, Opts,

@@ -9,21 +9,14 @@
 //! - return `R = sum_j gamma^(K_j) r_j`, where `K_j` is the number of
 //!   simulation steps before decision j in the window,
 //! - bootstrap discount `gamma^(K)` with K the window's total steps, or 0
-//!   when the episode ended inside the window,
+//!   when the episode ended inside the window (by the step limit too: it is
+//!   part of the task, and the observation carries the steps taken),
 //! - the observation n decisions later (or the episode's last one),
-//! - priority `|R + discount * max_a Q(s', a) - Q(s_t, a_t)|`.
+//! - priority `|R + discount * max_a Q(s', a) - Q(s_t, a_t)|`,
 //!
-//! This is what the replay's [`TransitionBatch`] carries (`rewards`,
-//! `discounts`, `priorities`) and what the learner's target
-//! `R + discount * Q_target(s', argmax Q(s'))` expects. Episodes that end by
-//! the step limit are terminal too (the step limit is part of the task, and
-//! the observation carries the steps taken).
-//!
-//! An episode end flushes the whole window. [`NStepAssembler::cut`] emits
-//! the window bootstrapped from the current observation; the actor calls it
-//! before an exploratory action, so no return sums over one.
-//! [`BatchBuilder`] packs transitions into a batch, each observation once
-//! in its pool.
+//! the replay's [`TransitionBatch`] columns (`rewards`, `discounts`,
+//! `priorities`) and what the learner's target `R + discount *
+//! Q_target(s', argmax Q(s'))` expects. [`BatchBuilder`] packs them.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
@@ -79,8 +72,10 @@ struct Decision {
 
 /// The n-step window of one environment. Call [`begin`](Self::begin) with
 /// each new observation and its Q-values (before acting), then
-/// [`record`](Self::record) with what the action did. Cost: O(n) per
-/// emitted transition, no allocation beyond the window.
+/// [`record`](Self::record) with what the action did. An episode end
+/// flushes the whole window; the actor calls [`cut`](Self::cut) before an
+/// exploratory action. Cost: O(n) per emitted transition, no allocation
+/// beyond the window.
 #[derive(Debug, Clone)]
 pub struct NStepAssembler {
     n: usize,

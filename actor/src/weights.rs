@@ -10,14 +10,8 @@
 //! thread loads it into its network (a few hundred microseconds for the
 //! default network; the environments never wait on the network). While the
 //! learner is unreachable the subscription retries with backoff and the
-//! actor acts on the last weights it has.
-//!
-//! The iceoryx2 subscription polls its service every 20 ms, on its own
-//! thread. For an f32 MLP, [`LiveNetwork`] computes with a
-//! `crossroads_model::NativeMlp` copied again at each version it applies.
-//! Weights of another architecture for the same input length and action
-//! count replace the network; weights for another observation or action set
-//! are an error that stops the actor.
+//! actor acts on the last weights it has. The iceoryx2 subscription polls
+//! every 20 ms; [`LiveNetwork`] says which weights it accepts.
 
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 

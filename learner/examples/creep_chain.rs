@@ -1,45 +1,22 @@
 //! The creep stall, small: a chain of creep positions ending at a line
 //! where the crossing traffic comes into view, trained by the project's
-//! dueling double DQN ([`Trainer`]) from an Ape-X epsilon ladder of
-//! environments, n-step returns with the acting network's priorities, a
-//! proportional replay and a samples-per-insert ratio, as `crossroads
-//! train` does on the occlusion family, at a thousandth of its cost.
+//! dueling double DQN ([`Trainer`]) fed as `crossroads train` feeds it on
+//! the occlusion family (an Ape-X epsilon ladder, n-step returns with the
+//! acting network's priorities, a proportional replay, a samples-per-insert
+//! ratio), at a thousandth of its cost.
 //!
-//! The task: from position 0, *creep* moves one position on (at most to
-//! the line, `--positions`), *wait* stays, *go* ends the episode. Every
-//! step costs 0.01. Each step the crossing is clear with probability
-//! `--clear`; the observation shows it only at the line. A *go* succeeds
-//! (+1) when the crossing is clear and collides (-10) otherwise, seen or
-//! not, so going blind is worth `11 * clear - 10` and going at the line
-//! when clear +1. An episode times out after `--steps` steps (terminal).
-//! The best policy creeps to the line and goes when it sees the crossing
-//! clear; the trap is waiting.
-//!
-//! `--cars K` hides the clear moment in a picture, as the grid of the
-//! occlusion family does: the crossing holds K cars, each at a distance
-//! drawn anew every step (uniform in 0..1), and it is clear when every car
-//! is farther than a threshold set so that it is clear with probability
-//! `--clear`. At the line the observation shows the K distances (zeros
-//! before it); the network must learn the conjunction from the rare
-//! exploring *go*s that succeed.
+//! From position 0, *creep* moves one position on, *wait* stays, *go* ends
+//! the episode; every step costs 0.01 and the crossing is clear with
+//! probability `--clear`, shown only at the line. A *go* earns +1 when it
+//! is clear and -10 otherwise, seen or not (going blind is worth
+//! `11 * clear - 10`): the best policy creeps to the line and goes when it
+//! sees it clear; the trap is waiting. Every `--every` updates it prints the
+//! greedy policy's rates and values at the line. Flags: `parse` (`Options`
+//! says what each sets). Findings: reports/time-to-target/NOTES.md.
 //!
 //! ```text
-//! cargo run --release -p crossroads-learner --example creep_chain -- \
-//!     --ratio 0.5 --updates 20000 --seeds 1,2,3
+//! cargo run --release -p crossroads-learner --example creep_chain -- --cars 4 --ratio 0.5 --seeds 1,2,3
 //! ```
-//!
-//! ```text
-//! cargo run --release -p crossroads-learner --example creep_chain -- \
-//!     --cars 4 --ratio 0.5 --updates 20000 --seeds 1,2,3
-//! ```
-//!
-//! `--demo-envs K --demo-updates U` lets the K least exploring
-//! environments of the ladder follow the rule (creep to the line, go when
-//! it is seen clear) for the first U updates: demonstrations in the replay,
-//! as `actor.early_demo_envs` does in `crossroads train`.
-//!
-//! Prints, every `--every` updates, the greedy policy's success, collision
-//! and timeout rates and the learned values at the line.
 
 use std::collections::VecDeque;
 
@@ -61,8 +38,11 @@ const COLLISION: f32 = -10.0;
 /// Everything a run is told.
 #[derive(Debug, Clone)]
 struct Options {
+    /// Position of the line: *creep* goes from 0 up to it.
     positions: usize,
+    /// Probability that the crossing is clear in a step.
     clear: f64,
+    /// Steps before an episode times out (terminal).
     steps: u32,
     envs: usize,
     n_step: usize,
@@ -83,13 +63,18 @@ struct Options {
     /// the largest priority seen (the PER paper).
     max_priority: bool,
     /// Cars of the crossing whose distances the line shows (0: a plain
-    /// clear bit).
+    /// clear bit), hiding the clear moment in a picture as the occlusion
+    /// family's grid does: each at a distance drawn anew every step
+    /// (uniform in 0..1), the crossing clear when every car is farther than
+    /// a threshold set for `clear`; zeros before the line. The network must
+    /// learn the conjunction from the rare exploring *go*s that succeed.
     cars: usize,
     /// The loss's Huber delta (the project's default: 20).
     huber: f64,
     /// Environments (the least exploring of the ladder) that follow the
     /// rule (creep to the line, go when it is seen clear) instead of the
-    /// network, until `demo_updates` updates.
+    /// network, until `demo_updates` updates: demonstrations in the replay,
+    /// as `actor.early_demo_envs` does in `crossroads train`.
     demo_envs: usize,
     /// Updates after which the demonstrating environments explore like
     /// the rest.

@@ -12,17 +12,10 @@
 //! | `optimizer.safetensors` | optimizer state tensors `<slot>.<variable>`; metadata `optimizer`, `steps` |
 //! | `manifest.json` | [`Manifest`]: step, version, scenario, evaluation, config, time, network |
 //!
-//! Writes go to a hidden temporary folder (files fsynced), which is renamed
-//! into place and the directory fsynced, so a checkpoint is either whole or
-//! absent; leftovers of an interrupted write are removed on open. After each
-//! write the newest `keep` checkpoints are kept, plus the best by the
-//! evaluation metric.
-//!
-//! An id must be a plain folder name, and a symlink is never followed. The
-//! directory also holds the version lease ([`VERSION_LEASE_FILE`], written
-//! atomically): the learner leases weights versions a block at a time
-//! before publishing them and starts above the lease, so after a kill -9
-//! versions still only increase.
+//! A checkpoint is either whole or absent; after each write the newest
+//! `keep` are kept, plus the best by the evaluation metric. An id must be a
+//! plain folder name, and a symlink is never followed. The directory also
+//! holds the version lease ([`VERSION_LEASE_FILE`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::{self, File};
@@ -45,7 +38,9 @@ pub use crossroads_types::checkpoint::{
 
 const TMP_PREFIX: &str = ".tmp-";
 /// The file of the version lease: the highest weights version a learner
-/// of this folder may have published.
+/// of this folder may have published, written atomically. The learner
+/// leases versions a block at a time before publishing them and starts
+/// above the lease, so after a kill -9 versions still only increase.
 pub const VERSION_LEASE_FILE: &str = "versions.lease";
 
 /// Why a checkpoint operation failed.
@@ -164,7 +159,10 @@ pub struct NewCheckpoint<'a> {
 }
 
 /// The checkpoints of one directory. Thread-safe: writes, prunes and
-/// deletes are serialized by a lock; reads take it briefly.
+/// deletes are serialized by a lock; reads take it briefly. Writes go to a
+/// hidden temporary folder (files fsynced), which is renamed into place
+/// and the directory fsynced; leftovers of an interrupted write are
+/// removed on open.
 #[derive(Debug)]
 pub struct CheckpointStore {
     dir: PathBuf,

@@ -2,30 +2,21 @@
 //! broadcast to actors, checkpoints and their gRPC API. Never steps a
 //! simulator.
 //!
-//! Data flow: [`sampler::spawn_prefetch`] samples batches from the replay
-//! server over gRPC in the background and decodes them into
-//! [`TrainingBatch`]es; the training thread ([`training::Learner`]) takes
-//! them and runs [`Trainer::update`] (double-DQN n-step targets under
-//! `no_grad`, importance-weighted Huber loss, [`Optimizer`] step with
-//! gradient clipping, target-network update), hands the new priorities to
-//! [`sampler::spawn_priority_sender`], and on its schedules publishes the
-//! weights (a monotonic version, into a
-//! `crossroads_transport::WeightsSlot` that the gRPC stream reads, and
-//! `crossroads_transport::weights_shm::ShmWeightsPublisher` for actors on
-//! this host) and writes checkpoints ([`CheckpointStore`]:
-//! safetensors weights, target network and optimizer state plus a JSON
-//! manifest, written atomically). The tonic service (private: no prost
-//! type is in this crate's API) serves weights, checkpoints and status;
-//! its client (`LearnerClient`) and the conversions to and from the wire
-//! are in `crossroads_transport`. [`start`] / [`run`] put it all together
-//! under one shutdown signal. [`bench`](mod@bench) measures updates per
-//! second and the time spent waiting for samples.
-//!
-//! The whole configuration is the `[learner]` section
-//! ([`crossroads_config::LearnerConfig`]), with `runtime.device` for where
-//! the networks, batches and optimizer state live (the CPU or CUDA device
-//! 0, [`Trainer::new_on`]; everything published or stored comes back to
-//! the CPU).
+//! [`sampler::spawn_prefetch`] samples batches from the replay over gRPC in
+//! the background into [`TrainingBatch`]es; the training thread
+//! ([`training::Learner`]) runs [`Trainer::update`] on them (double-DQN
+//! n-step targets under `no_grad`, importance-weighted Huber loss,
+//! [`Optimizer`] step with gradient clipping, target update), hands the new
+//! priorities to [`sampler::spawn_priority_sender`], publishes versioned
+//! weights (into a `crossroads_transport::WeightsSlot` read by the gRPC
+//! stream, and over iceoryx2 to actors on this host) and writes
+//! [`CheckpointStore`] checkpoints. The tonic service (private: no prost
+//! type in this crate's API) serves weights, checkpoints and status; its
+//! client is `crossroads_transport::LearnerClient`. [`start`] / [`run`] put
+//! it together under one shutdown signal; [`bench`](mod@bench) measures
+//! updates per second. Configuration: [`crossroads_config::LearnerConfig`],
+//! and `runtime.device` for where networks, batches and optimizer state
+//! live ([`Trainer::new_on`]; what is published or stored is on the CPU).
 
 pub mod batch;
 pub mod bench;

@@ -2,26 +2,21 @@
 //! the learner (training), and its weights format.
 //!
 //! A [`NetworkSpec`] says what a network is: the [`ObservationLayout`] it
-//! reads (a channel-major grid plus dense features, as the simulator
-//! gives it; this crate knows no sizes of its own), the
-//! action set it scores and its trunk ([`TrunkKind::Mlp`] or
-//! [`TrunkKind::Conv`]); it and the weights metadata ([`WeightsMeta`]) are
-//! tch-free and live in `crossroads_types`, re-exported here. [`QNetwork`] builds it with value V(s) and
-//! advantage A(s, a) heads combined as Q = V + A - mean(A) (Wang et al.
-//! 2016); [`QNetwork::infer`] is the batched inference actors call, and
-//! [`QNetwork::q_values`] the differentiable forward pass the learner trains;
-//! both read [`Observations`], sparse where the trunk's first layer can
-//! skip the zeros of a TTG observation (an MLP's: an embedding bag over its
-//! transposed weight). A network computes its trunk in a [`Precision`]:
-//! fp32, or bf16 over fp32 master weights where the CPU has matrix units
-//! for it. [`NativeMlp`] is an MLP's forward pass in plain Rust over a copy
-//! of its weights, for the actor's small batches.
-//! [`weights`] is the on-disk and on-wire format: safetensors with the spec
-//! and a version number in its metadata, readable by Python's safetensors
-//! and PyTorch. [`network_spec`] is the network a run's `[sim]` and
-//! `[learner]` sections describe. Networks are built on the CPU;
-//! [`QNetwork::new_on`] moves one to the device [`resolve_device`] picks
-//! for `runtime.device` (the learner's; actors stay on the CPU).
+//! reads (this crate knows no sizes of its own), the action set it scores
+//! and its trunk ([`TrunkKind::Mlp`] or [`TrunkKind::Conv`]); it and
+//! [`WeightsMeta`] are tch-free, re-exported from `crossroads_types`.
+//! [`QNetwork`] combines value and advantage heads as Q = V + A - mean(A)
+//! (Wang et al. 2016); [`QNetwork::infer`] is the actors' batched inference
+//! and [`QNetwork::q_values`] the learner's differentiable forward pass,
+//! both over [`Observations`], sparse where the first layer can skip a TTG
+//! observation's zeros (an MLP's: an embedding bag over its transposed
+//! weight). The trunk computes in a [`Precision`] (fp32, or bf16 over fp32
+//! master weights); [`NativeMlp`] is an MLP's forward pass in plain Rust for
+//! the actor's small batches. [`weights`] is the on-disk and on-wire format
+//! (safetensors with spec and version in its metadata, readable by PyTorch).
+//! [`network_spec`] is the network of a run's `[sim]` and `[learner]`;
+//! networks are built on the CPU, and [`QNetwork::new_on`] moves one to the
+//! device [`resolve_device`] picks for `runtime.device` (the learner's).
 
 mod config;
 mod device;

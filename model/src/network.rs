@@ -12,13 +12,9 @@
 //! [`QNetwork::copy_from`] and [`QNetwork::soft_update_from`] serve the
 //! target network. On a device other than the CPU the forward passes move
 //! their input there ([`QNetwork::q_values_of`]); weights files and what
-//! [`QNetwork::infer`] returns are read back to the CPU.
-//!
-//! Invariant: outside the network a variable has PyTorch's layout
-//! ([`QNetwork::named_variables`], weights files, optimizer state in
-//! checkpoints); an MLP's first weight is stored transposed
-//! ([`QNetwork::parameters`], what the optimizer updates), and
-//! [`QNetwork::file_layout`] turns a tensor between the two.
+//! [`QNetwork::infer`] returns are read back to the CPU. Outside the network
+//! a variable has PyTorch's layout; an MLP's first weight is stored
+//! transposed ([`QNetwork::file_layout`] turns a tensor between the two).
 
 use crossroads_types::codec;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
@@ -300,7 +296,9 @@ impl QNetwork {
     }
 
     /// Every variable with its name, sorted by name, in the layout of the
-    /// weights file (PyTorch's: the first MLP weight `[hidden, inputs]`).
+    /// weights file (PyTorch's: the first MLP weight `[hidden, inputs]`),
+    /// as every variable is seen outside the network (weights files,
+    /// optimizer state in checkpoints).
     /// The tensors share memory with the variables.
     pub fn named_variables(&self) -> Vec<(String, Tensor)> {
         self.parameters()

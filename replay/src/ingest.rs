@@ -9,15 +9,14 @@
 //! the first publisher's samples while it has any, so under a rate limiter
 //! one busy actor would starve the others (seen with two actors: the second
 //! waited 30 s for acknowledgements and fell back to dropping). The thread
-//! takes every waiting sample into a queue per publisher and inserts one
-//! batch of each in turn; the publishers' own limit on unacknowledged
-//! batches (`actor.in_flight`) bounds those queues and is where they feel
-//! the back-pressure. Batches take the insert path of gRPC's
-//! ([`crate::insert`]), and the thread goes on with the next while the
-//! write-ahead log syncs. Every batch is answered on
-//! `<prefix>/replay/<table>/acks` once stored or rejected. At shutdown the
-//! queue is drained into the tables, whatever the rate limiter says,
-//! before the server's last snapshot.
+//! queues every waiting sample per publisher and inserts one batch of each
+//! in turn; the publishers' limit on unacknowledged batches
+//! (`actor.in_flight`) bounds those queues and is where they feel the
+//! back-pressure. Batches take gRPC's insert path ([`crate::insert`]); the
+//! thread goes on with the next while the write-ahead log syncs. Every
+//! batch is answered on `<prefix>/replay/<table>/acks` once stored or
+//! rejected. At shutdown the queue is drained into the tables, whatever the
+//! rate limiter says, before the server's last snapshot.
 
 use std::collections::VecDeque;
 use std::sync::Arc;

@@ -5,23 +5,18 @@
 //! compact ([`compact`]) and shared, in an
 //! [`ObservationStore`](storage::ObservationStore); a
 //! [`RateLimiter`](rate_limiter::RateLimiter) decides when inserts and
-//! samples may proceed. [`snapshot`] writes and restores tables atomically
-//! with a checksum; the write-ahead log ([`wal`]) makes every acknowledged
-//! insert durable between snapshots. The server ([`server::start`], [`server::run`]) serves
-//! the tables over gRPC (the `service` module, the tonic service) and takes
-//! batches from actors on the same host over iceoryx2 (the `ingest`
-//! module), with the `crossroads_replay_*` metrics of [`metrics`]. Both
-//! transports insert through one path (the `insert` module): a table
-//! [`Reservation`] first, then the log, then the table.
-//! [`bench`](mod@bench) measures inserts, samples and bytes per stored
+//! samples may proceed. [`snapshot`] writes and restores tables atomically;
+//! the write-ahead log ([`wal`]) makes every acknowledged insert durable
+//! between snapshots. The server ([`server::start`], [`server::run`])
+//! serves the tables over gRPC (`service`) and takes batches from actors on
+//! its host over iceoryx2 (`ingest`), with the metrics of [`metrics`]; both
+//! insert through one path (`insert`): a table [`Reservation`], the log,
+//! the table. [`bench`](mod@bench) measures inserts, samples and bytes per
 //! transition.
 //!
-//! Batches enter the server validated once, where they arrive
-//! (`crossroads_transport::wire` for gRPC, `crossroads_transport::shm` for
-//! shared memory), as [`ValidBatch`](crossroads_types::ValidBatch)es; a
-//! [`PreparedBatch`] is made from one without another check. Invariant:
-//! no public signature here has a prost type; the tonic service and the
-//! ingest thread are crate-private.
+//! Batches arrive validated once, as [`ValidBatch`](crossroads_types::ValidBatch)es
+//! ([`PreparedBatch`] is made from one without another check). No public
+//! signature has a prost type; the tonic service and ingest are private.
 
 pub mod bench;
 pub mod compact;

@@ -1,26 +1,9 @@
-//! The replay server's Prometheus metrics, `crossroads_replay_*`.
-//!
-//! | name | type | labels |
-//! | --- | --- | --- |
-//! | `crossroads_replay_size_items` | gauge | table |
-//! | `crossroads_replay_capacity_items` | gauge | table |
-//! | `crossroads_replay_storage_bytes` | gauge | table |
-//! | `crossroads_replay_inserts_total` | counter (items) | table, transport |
-//! | `crossroads_replay_insert_batches_total` | counter | table, transport |
-//! | `crossroads_replay_samples_total` | counter (items) | table |
-//! | `crossroads_replay_priority_updates_total` | counter | table |
-//! | `crossroads_replay_priority_updates_ignored_total` | counter | table |
-//! | `crossroads_replay_rejections_total` | counter | reason |
-//! | `crossroads_replay_rate_limiter_waits_total` | counter | table, op |
-//! | `crossroads_replay_rate_limiter_wait_seconds` | histogram | table, op |
-//! | `crossroads_replay_snapshots_total` | counter | result |
-//! | `crossroads_replay_snapshot_duration_seconds` | gauge (last) | |
-//! | `crossroads_replay_snapshot_bytes` | gauge (last) | |
-//! | `crossroads_replay_snapshot_age_seconds` | gauge, at scrape | |
-//! | `crossroads_replay_wal_records_total` | counter (batches made durable) | |
-//! | `crossroads_replay_wal_bytes_total` | counter | |
-//! | `crossroads_replay_wal_sync_seconds` | histogram (write and fsync of a group) | |
-//! | `crossroads_replay_wal_errors_total` | counter (failed groups) | |
+//! The replay server's Prometheus metrics, `crossroads_replay_*`: each is
+//! registered in [`ReplayMetrics::new`] with its labels (of `table`,
+//! `transport`, `op`, `reason` and `result`, those that apply) and a help
+//! text that says what it counts; `crossroads_replay_snapshot_age_seconds`
+//! is computed at scrape. docs/roles.md, "Metrics of each role", lists them
+//! for readers.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};

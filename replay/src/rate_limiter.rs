@@ -10,16 +10,9 @@
 //!   `tolerance >= max(1, r)` guarantees that when one side must wait the
 //!   other can go, so the two never wait on each other forever.
 //!
-//! With a ramp the ratio moves from an early one to `r` as samples
-//! accumulate: fresh experience early, more reuse late. The gap is then
-//! kept in inserts, `g = inserts - I(samples)`, where `I(s)` is the inserts
-//! the schedule asks for `s` samples (`I(s) = s / r` for a constant ratio),
-//! within `min_size ± tolerance / r(samples)`; for a constant ratio that is
-//! the rule above divided by `r`, and the same reasoning keeps one side
-//! free to go.
-//!
-//! The limiter only answers questions and counts; waiting (with timeouts)
-//! is the table's, done without holding any lock.
+//! With a [`RatioRamp`] the ratio moves from an early one to `r` as samples
+//! accumulate. The limiter only answers questions and counts; waiting
+//! (with timeouts) is the table's, done without holding any lock.
 
 /// The limiter's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,7 +29,15 @@ pub struct RateLimiterConfig {
 }
 
 /// Samples per insert `early` up to `from` samples, moving linearly to the
-/// limiter's `samples_per_insert` at `to` samples, and that ratio after.
+/// limiter's `samples_per_insert` at `to` samples, and that ratio after:
+/// fresh experience early, more reuse late.
+///
+/// With a ramp the limiter keeps the gap in inserts,
+/// `g = inserts - I(samples)`, where `I(s)` is the inserts the schedule
+/// asks for `s` samples ([`RatioRamp::inserts_for`]; `I(s) = s / r` for a
+/// constant ratio), within `min_size ± tolerance / r(samples)`; for a
+/// constant ratio that is the module's rule divided by `r`, and the same
+/// reasoning keeps one side free to go.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RatioRamp {
     /// Samples per insert at the start (above 0).

@@ -5,29 +5,17 @@
 //! written to a temporary file, fsynced, renamed into place, the directory
 //! fsynced, then read back and checked before older snapshots are pruned
 //! (the newest `keep` stay). A crash at any point leaves the previous
-//! snapshots as they were.
+//! snapshots as they were. Each snapshot first seals the write-ahead log's
+//! segment ([`crate::wal`]). The format: [`with_header`] and [`encode`].
 //!
-//! Format, little-endian: a 32-byte header (`CRRPLSNP`, format version
-//! u32, flags u32, body length u64, CRC-32 of the body u32, CRC-32 of the
-//! header's first 28 bytes u32), then the body: the table count, and per
-//! table its name, observation layout and action count, keys, counters,
-//! item columns (oldest first) and compact observations. A truncated file
-//! fails the length check, a flipped bit a checksum; either is reported
-//! with the file's path and the file is renamed `*.corrupt` at restore,
-//! never deleted or overwritten.
-//!
-//! At start the newest valid snapshot is restored. Snapshots that exist but
-//! are all corrupt are an error (starting empty would prune them), as is a
-//! snapshot holding a table the server does not serve (`server`). A
-//! restored image must hold only what valid batches could have put there,
-//! or `Table::restore` refuses it: samples are not checked again. Each
-//! snapshot first seals the write-ahead log's segment ([`crate::wal`]).
-//!
-//! Version 2 stores the layout (kind, channels, rows, cols, extra; spec
-//! flag 2). Version 1, written by earlier builds, stored the kind and a
-//! flat shape (spec flag 1); it is still read, as a legacy layout of that
-//! kind and length (`ObservationLayout::legacy`), which the table replaces
-//! with the layout of its next insert of the same kind and length.
+//! At start the newest valid snapshot is restored
+//! ([`Snapshots::restore_latest`]). A truncated file fails the length
+//! check, a flipped bit a checksum; either is reported with the file's path
+//! and the file is renamed `*.corrupt`, never deleted or overwritten. A
+//! snapshot holding a table the server does not serve is an error
+//! (`server`), and a restored image must hold only what valid batches could
+//! have put there, or `Table::restore` refuses it: samples are not checked
+//! again.
 
 use std::fs::{self, File};
 use std::io::{Read, Write};
@@ -44,7 +32,12 @@ use crate::wal::{Wal, WalError};
 
 /// First bytes of every snapshot.
 pub const MAGIC: &[u8; 8] = b"CRRPLSNP";
-/// Version of the format written; 1 (earlier builds) is read too.
+/// Version of the format written. Version 2 stores the layout (kind,
+/// channels, rows, cols, extra; spec flag 2). Version 1, written by earlier
+/// builds, stored the kind and a flat shape (spec flag 1); it is still read,
+/// as a legacy layout of that kind and length (`ObservationLayout::legacy`),
+/// which the table replaces with the layout of its next insert of the same
+/// kind and length.
 pub const FORMAT_VERSION: u32 = 2;
 /// Spec flag of a table with no layout yet.
 const NO_SPEC: u8 = 0;
@@ -113,7 +106,10 @@ pub struct Written {
     pub duration: Duration,
 }
 
-/// Encodes table images into a snapshot file's bytes (header and body).
+/// Encodes table images into a snapshot file's bytes, little-endian: the
+/// header ([`with_header`]), then the body: the table count, and per table
+/// its name, observation layout and action count, keys, counters, item
+/// columns (oldest first) and compact observations.
 pub fn encode(tables: &[(String, TableImage)]) -> Vec<u8> {
     let mut body = Vec::new();
     put_u32(&mut body, tables.len() as u32);
@@ -123,8 +119,9 @@ pub fn encode(tables: &[(String, TableImage)]) -> Vec<u8> {
     with_header(&body)
 }
 
-/// A snapshot file's bytes of `body`: the header (magic, version, length,
-/// both checksums) and the body. [`encode`] writes its body through it;
+/// A snapshot file's bytes of `body`: the 32-byte header ([`MAGIC`], format
+/// version u32, flags u32, body length u64, CRC-32 of the body u32, CRC-32
+/// of the header's first 28 bytes u32) and the body. [`encode`] writes its body through it;
 /// the fuzz target uses it to reach the body's decoder past the
 /// checksums.
 pub fn with_header(body: &[u8]) -> Vec<u8> {
@@ -456,7 +453,7 @@ impl Snapshots {
     /// The newest valid snapshot's tables, if any. Corrupt snapshots are
     /// reported, renamed `*.corrupt` (kept for inspection) and skipped for
     /// an older valid one; if snapshots exist and none is valid, that is an
-    /// error rather than a silent empty start.
+    /// error rather than a silent empty start (which would prune them).
     pub fn restore_latest(&self) -> Result<Option<Restored>, SnapshotError> {
         let mut problems = Vec::new();
         for (_, path) in self.list()? {

@@ -15,11 +15,8 @@
 //! decoded after, and waits for the rate limiter happen with no lock held,
 //! so a caller that goes away mid-wait (its future dropped) leaves nothing
 //! behind.
-//!
 //! Each public method of [`Table`] states its contract, after Reverb's
-//! `table.h`: whether it blocks (waits for the rate limiter; "no" means it
-//! only takes the lock, held for work proportional to its input), its
-//! timeout, and what it mutates.
+//! `table.h`: whether it blocks, its timeout, and what it mutates.
 
 use std::convert::Infallible;
 use std::sync::Arc;
@@ -223,8 +220,9 @@ struct Inner {
 /// `Arc`.
 ///
 /// Every method but [`insert`](Self::insert), [`reserve`](Self::reserve)
-/// and [`sample`](Self::sample) returns without waiting; those wait for
-/// the rate limiter with no lock held, at most their timeout. Each
+/// and [`sample`](Self::sample) returns without waiting (it only takes the
+/// lock, held for work proportional to its input); those wait for the
+/// rate limiter with no lock held, at most their timeout. Each
 /// method's doc states what it mutates; the accessors
 /// ([`name`](Self::name), [`config`](Self::config),
 /// [`metrics`](Self::metrics)) take no lock and mutate nothing. A change

@@ -5,47 +5,17 @@
 //! record fails is neither sampled nor kept, so the actor's resend stores
 //! it once. The insert reserves its room in the table first (the rate
 //! limiter's wait and the spec check, [`Table::reserve`]) and hands the
-//! reservation to the log. One writer thread appends and fsyncs records in
-//! groups (group commit): whatever arrived while the last fsync ran, or up
-//! to `sync_interval` / `sync_bytes` more, shares one fsync; once it
-//! returns the writer stores the group's batches in their tables, in log
-//! order, and answers every insert of the group.
+//! reservation to the log ([`Wal::append`]). One writer thread appends and
+//! fsyncs records in groups (group commit) and gives each record its
+//! table's keys, so the keys in the log are the keys in the table.
 //!
-//! A record is the batch as a small [`TableImage`] whose keys say where it
-//! sits. The writer gives the keys as it frames the record: its table's
-//! next key, after the group's earlier records. The writer is the only one
-//! storing batches while the log is on and stores each group in the order
-//! it wrote it, so the keys in the log are the keys in the table, and the
-//! replay at start, which inserts the records a snapshot lacks in key
-//! order, gives them the same keys again. A failed group is stored nowhere
-//! and takes no keys: the next group's records take them, and the log has
-//! no gap. (Keys handed out before the write would leave a gap in the
-//! table's ring wherever a write failed.)
-//!
-//! The log is a folder of segments `wal-<seq>.log` beside the snapshots.
-//! A snapshot seals the current segment before it copies the tables
-//! ([`Wal::rotate`]), so every record in a sealed segment is in the copy;
-//! once the snapshot is written and read back, the sealed segments are
-//! deleted ([`Wal::delete_through`]). At start the newest snapshot is
-//! restored, then every segment's records whose keys the snapshot does
-//! not hold are inserted again in key order ([`replay_into`]), and a
-//! snapshot is written at once so the log starts again from empty.
-//!
-//! Format, little-endian. A segment starts with 16 bytes: `CRRPLWAL`, the
-//! format version u32 and the CRC-32 of those 12 bytes. Each record is its
-//! body's length u32, the body's CRC-32 u32, then the body: a table's name
-//! and image as a snapshot stores it ([`snapshot::encode_table`]). A crash
-//! during a write leaves at most a torn last record, which fails its length
-//! or checksum: reading stops there and keeps what came before. Version 2
-//! records hold the observation layout; version 1 segments, of earlier
-//! builds, are still read (their flat shape as a legacy layout, as in
-//! [`snapshot`]).
-//!
-//! A write that fails (a full disk) truncates the segment back to its last
-//! whole record, seals it, and fails every insert of its group; for one
-//! second after, inserts are refused before they touch the table
-//! ([`Wal::check_writable`]), then the next one tries again. Records
-//! already written are never rewritten.
+//! The log is a folder of segments `wal-<seq>.log` beside the snapshots
+//! ([`segment_header`], [`encode_record`]). A snapshot seals the current
+//! segment before it copies the tables ([`Wal::rotate`]) and deletes the
+//! sealed segments once it reads back ([`Wal::delete_through`]). At start
+//! the newest snapshot is restored, the records it lacks are inserted again
+//! ([`replay_into`]), and a snapshot is written at once so the log starts
+//! again from empty. A failed write: [`Wal::check_writable`].
 
 use std::collections::BTreeMap;
 use std::fs::{self, File, OpenOptions};
@@ -64,7 +34,9 @@ use crate::table::{Inserted, PreparedBatch, Reservation, Table, TableImage};
 
 /// First bytes of every segment.
 pub const MAGIC: &[u8; 8] = b"CRRPLWAL";
-/// Version of the format written; 1 (earlier builds) is read too.
+/// Version of the format written. Version 2 records hold the observation
+/// layout; version 1 segments, of earlier builds, are still read (their
+/// flat shape as a legacy layout, as in [`snapshot`]).
 pub const FORMAT_VERSION: u32 = 2;
 const HEADER_LEN: usize = 16;
 const PREFIX: &str = "wal-";
@@ -144,8 +116,12 @@ pub struct WalConfig {
     pub sync_bytes: usize,
 }
 
-/// Appends one framed record (length, checksum, body) of `image` in table
-/// `table` to `out`.
+/// Appends one framed record of `image` in table `table` to `out`
+/// (little-endian): the body's length u32, its CRC-32 u32, then the body,
+/// the table's name and image as a snapshot stores it
+/// (`snapshot::encode_table`). The image's keys say where the batch sits.
+/// A crash during a write leaves at most a torn last record, which fails
+/// its length or checksum: reading stops there and keeps what came before.
 pub fn encode_record(out: &mut Vec<u8>, table: &str, image: &TableImage) {
     let at = out.len();
     out.extend_from_slice(&[0; 8]);
@@ -156,7 +132,8 @@ pub fn encode_record(out: &mut Vec<u8>, table: &str, image: &TableImage) {
     out[at + 4..at + 8].copy_from_slice(&crc.to_le_bytes());
 }
 
-/// The segment header.
+/// The segment header, 16 bytes: [`MAGIC`], [`FORMAT_VERSION`] as a
+/// little-endian u32 and the CRC-32 of those 12 bytes.
 pub fn segment_header() -> [u8; HEADER_LEN] {
     let mut h = [0; HEADER_LEN];
     h[..8].copy_from_slice(MAGIC);
@@ -273,7 +250,8 @@ pub struct Replayed {
 }
 
 /// Inserts again, into `tables` (restored from the newest snapshot), every
-/// batch of the log in `dir` that they do not hold, oldest key first.
+/// batch of the log in `dir` that they do not hold, oldest key first, so
+/// each takes the key it was logged with.
 /// A segment whose header is damaged is renamed `*.corrupt` (kept) and
 /// skipped; a torn record ends its segment's reading (what came before
 /// counts). Blocking.
@@ -446,8 +424,11 @@ impl Wal {
     }
 
     /// Whether an insert may go ahead: not within a second of a failed
-    /// write. Call it before the table changes, so a refused insert leaves
-    /// nothing behind.
+    /// write. A write that fails (a full disk) cuts the segment back to its
+    /// last whole record, seals it and fails every insert of its group;
+    /// then inserts are refused here for a second, and the next one tries
+    /// again. Records already written are never rewritten. Call it before
+    /// the table changes, so a refused insert leaves nothing behind.
     pub fn check_writable(&self) -> Result<(), WalError> {
         match &*self.failed.lock() {
             Some((at, cause)) if at.elapsed() < RETRY_AFTER => Err(WalError::Unavailable {
@@ -524,7 +505,19 @@ impl Drop for Wal {
     }
 }
 
-/// The writer thread's state.
+/// The writer thread's state. Whatever arrived while the last fsync ran,
+/// or up to `sync_interval` / `sync_bytes` more, shares one fsync; once it
+/// returns the writer stores the group's batches in their tables, in log
+/// order, and answers every insert of the group.
+///
+/// The writer gives the keys as it frames a record: its table's next key,
+/// after the group's earlier records. It is the only one storing batches
+/// while the log is on and stores each group in the order it wrote it, so
+/// the keys in the log are the keys in the table, and the replay at start
+/// gives them the same keys again. A failed group is stored nowhere and
+/// takes no keys: the next group's records take them, and the log has no
+/// gap. (Keys handed out before the write would leave a gap in the table's
+/// ring wherever a write failed.)
 struct Writer {
     dir: PathBuf,
     sync_interval: Duration,

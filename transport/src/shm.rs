@@ -5,23 +5,15 @@
 //! `<prefix>/replay/<table>/insert` ([`service_name`]): the `#[repr(C)]`
 //! user header [`BatchFrameHeader`] and a `[u8]` payload holding the
 //! batch's columns followed by its observation pool, encoded by
-//! `crossroads_types::codec` exactly as on gRPC ([`write_frame`], [`read_frame`]).
-//! Both sides open the service with [`open_batch_service`], so its settings
-//! are defined once. The server answers every batch on
+//! `crossroads_types::codec` exactly as on gRPC ([`write_frame`],
+//! [`read_frame`]). Both sides open the service with
+//! [`open_batch_service`], so its settings are defined once. The server
+//! validates what it reads, once, and answers every batch on
 //! `<prefix>/replay/<table>/acks` ([`open_ack_service`]) with a
-//! [`ShmInsertAck`] naming the publisher and batch, once the batch is stored
-//! (or rejected). [`ShmBatchPublisher`] is the actor's side: it writes a
-//! [`ValidBatch`] into a loaned slot and sends, and collects its
-//! acknowledgements; the server validates what it reads, once; a
-//! send never waits longer than the configured timeout, and fails when no
-//! replay server is listening, so a writer never hangs on a dead server.
-//! Batches still queued when their publisher goes away are dropped by
-//! iceoryx2, so a publisher [`flush`](ShmBatchPublisher::flush)es before it
-//! ends.
-//!
-//! A successful send means the batch is in the server's queue; its
-//! [`ShmInsertAck`] means it is stored, as a gRPC acknowledgement does. So
-//! a publisher that crashes loses what it had not seen acknowledged.
+//! [`ShmInsertAck`] naming the publisher and batch once it is stored (or
+//! rejected), as a gRPC acknowledgement does: a send only puts the batch in
+//! the server's queue, so a publisher that crashes loses what it had not
+//! seen acknowledged. [`ShmBatchPublisher`] is the actor's side.
 
 use std::fmt;
 use std::time::Duration;

@@ -3,32 +3,20 @@
 //!
 //! - [`batch`]: the [`TransitionBatch`] (struct-of-arrays n-step
 //!   transitions over an [`ObservationPool`] that holds each observation
-//!   once, with the [`ObservationLayout`] they have) and its validation,
-//!   whose [`BatchError`] names the field; a
-//!   [`ValidBatch`] is a batch that passed it.
-//! - [`columns`]: [`Columns`], the six per-transition columns, written once
-//!   for batches, replay tables, their snapshots and samples.
-//! - [`sample`]: what a replay table answers ([`Sample`],
-//!   [`PrioritiesUpdated`]), for the server and its clients alike.
-//! - [`codec`]: the observation codec (dense f32 or sparse cells), the same
-//!   bytes on gRPC and in shared memory.
-//! - [`spec`]: what a Q-network is ([`NetworkSpec`]: the
-//!   [`ObservationLayout`] it reads, the action set it scores, its
-//!   [`TrunkKind`]).
-//! - [`weights`]: one published version of the network ([`Weights`]) and
-//!   the metadata of a weights file ([`WeightsMeta`]), read from the
-//!   safetensors header without building a tensor.
-//! - [`tensors`]: safetensors files of f32 tensors ([`F32Tensor`]) read
-//!   and checked without a tensor library, for weights and optimizer
-//!   state alike.
-//! - [`checkpoint`]: which names a checkpoint may have, and its manifest
-//!   ([`Manifest`]), checked against the checkpoint's files.
+//!   once, with their [`ObservationLayout`]), its validation, whose
+//!   [`BatchError`] names the field, and [`ValidBatch`], a batch that passed.
+//! - [`columns`]: [`Columns`], the six per-transition columns of batches,
+//!   tables, snapshots and samples; [`sample`]: what a table answers
+//!   ([`Sample`], [`PrioritiesUpdated`]); [`codec`]: the observation codec
+//!   (dense f32 or sparse cells), the same bytes on gRPC and shared memory.
+//! - [`spec`]: [`NetworkSpec`] (the layout a Q-network reads, the action
+//!   set it scores, its [`TrunkKind`]); [`weights`]: [`Weights`] and the
+//!   [`WeightsMeta`] of a safetensors header; [`tensors`]: f32 safetensors
+//!   ([`F32Tensor`]); [`checkpoint`]: names and [`Manifest`]; no tensor
+//!   library needed.
 //!
-//! Invariant, enforced by the crate graph: this crate depends on no tensor
-//! library (tch), no RPC framework (tonic) and no wire format (prost), so
-//! any crate can use the domain types without pulling those in; conversions
-//! to the wire live in `crossroads_transport`, tensors in
-//! `crossroads_model`.
+//! No tch, tonic or prost (the crate graph enforces it): the wire is in
+//! `crossroads_transport`, tensors in `crossroads_model`.
 
 pub mod batch;
 pub mod checkpoint;
