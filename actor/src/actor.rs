@@ -16,8 +16,8 @@ use crossroads_common::Shutdown;
 use crossroads_common::retry::Backoff;
 use crossroads_config::{ActorConfig, SimConfig, TransportConfig};
 use crossroads_sim::{
-    ActionSet, EnvConfig, Policy, PolicyRng, PolicySpec, Scenario, SensedCar, ShieldParams,
-    check_go, episode_seed, sense, shield_fallback, splitmix64,
+    ActionSet, EnvConfig, EpisodeEnd, Policy, PolicyRng, PolicySpec, Scenario, SensedCar, ShieldParams,
+    check_go, episode_seed, sense, shield_fallback, splitmix64, VecEnv,
 };
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;
@@ -31,7 +31,6 @@ use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, Ob
 use crate::push::Pusher;
 use crate::stats::EpisodeStats;
 use crate::values::{ActionValues, argmax};
-use crate::vec_env::{EpisodeEnd, VecEnv};
 
 /// Everything an [`Actor`] needs, resolved from the config.
 #[derive(Debug, Clone)]

@@ -1,7 +1,7 @@
 //! Actors: the processes that turn simulator steps into prioritized n-step
 //! transitions for the replay server.
 //!
-//! An [`Actor`] owns a [`VecEnv`] (M environments of one scenario stepped in
+//! An [`Actor`] owns a [`VecEnv`](crossroads_sim::VecEnv) (M environments of one scenario stepped in
 //! parallel with rayon, their observations in one contiguous buffer) and
 //! per environment an [`NStepAssembler`]. Each [`Actor::step`] makes one
 //! batched call of an [`ActionValues`] (the Q-network, supplied by the
@@ -28,7 +28,6 @@ mod process;
 mod push;
 mod stats;
 mod values;
-mod vec_env;
 mod weights;
 mod worker;
 
@@ -47,5 +46,4 @@ pub use process::{ActorParts, DRAIN, RunningActor, run, start, start_with_max_st
 pub use push::{PushConfig, Pusher};
 pub use stats::EpisodeStats;
 pub use values::{ActionValues, ValuesError, argmax, max_value};
-pub use vec_env::{EnvStep, EpisodeEnd, VecEnv};
 pub use weights::{LiveNetwork, WeightsSubscription};

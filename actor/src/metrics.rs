@@ -9,7 +9,7 @@ use prometheus::{
     Registry,
 };
 
-use crate::vec_env::EpisodeEnd;
+use crossroads_sim::EpisodeEnd;
 
 /// Handles on the actor's metrics; cheap to clone (clones share values).
 #[derive(Debug, Clone)]

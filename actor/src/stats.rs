@@ -1,8 +1,6 @@
 //! Running totals of episode ends, for evaluation reports.
 
-use crossroads_sim::Outcome;
-
-use crate::vec_env::EpisodeEnd;
+use crossroads_sim::{EpisodeEnd, Outcome};
 
 /// Success, collision and timeout counts with mean time and braking, as
 /// the paper's tables report them. Cost: O(1) per episode.

@@ -41,7 +41,7 @@ pub trait ActionValues {
 
     /// [`ActionValues::q_values`] of observations given as their non-zero
     /// values, `(index, value)` per observation
-    /// ([`crate::VecEnv::sparse_observations`]). By default spread into
+    /// ([`crossroads_sim::VecEnv::sparse_observations`]). By default spread into
     /// dense rows for `q_values`.
     fn q_values_sparse(
         &mut self,

@@ -94,6 +94,10 @@ pub enum SimError {
     /// Evaluation settings are out of range.
     #[error("invalid evaluation settings: {0}")]
     EvalConfig(String),
+    /// Batched stepping ([`crate::VecEnv`]) was asked for no environments,
+    /// or given a number of actions other than its environments'.
+    #[error("vectorized environments: {0}")]
+    VecEnv(String),
 }
 
 impl SimError {

@@ -13,10 +13,10 @@
 //! written into caller buffers ([`ObsSpec`]; [`ObsKind`] gives the layout).
 //! A [`Policy`] acts for a batch of environments ([`TtcPolicy`], with or
 //! without creeping, [`RandomPolicy`], [`NeverPolicy`]; [`ShieldedPolicy`]
-//! puts one behind the safety shield). [`evaluate`] runs seeded trials in
-//! parallel, the same on any number of threads, into an [`EvalReport`];
-//! [`tune_ttc`], [`bench_scenario`], [`Scene`] and [`Scenario::export`] serve
-//! the CLI. Frame, units, metrics, calibration: docs/simulator.md.
+//! puts one behind the safety shield); a [`VecEnv`] steps many at once.
+//! [`evaluate`] runs seeded trials in parallel, the same on any number of
+//! threads, into an [`EvalReport`]; [`tune_ttc`], [`bench_scenario`],
+//! [`Scene`], [`Scenario::export`] serve the CLI. More: docs/simulator.md.
 
 mod action;
 mod bench;
@@ -39,6 +39,7 @@ mod seed;
 mod shield;
 mod traffic;
 mod tune;
+mod vec_env;
 
 pub use action::{ActionSet, Control, DURATIONS, Intent};
 pub use bench::{BenchFigures, bench_builtin, bench_scenario};
@@ -75,3 +76,4 @@ pub use seed::{episode_seed, policy_seed, splitmix64};
 pub use shield::{SensedCar, ShieldParams, Threat, ThreatKind, check_go, sense};
 pub use traffic::{Car, EgoConflict, EgoFoe, Traffic, give_way_decel};
 pub use tune::{SweepPoint, TuneReport, default_thresholds, tune_ttc};
+pub use vec_env::{EnvStep, EpisodeEnd, VecEnv};

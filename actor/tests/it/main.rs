@@ -4,5 +4,5 @@ mod actor;
 mod nstep;
 mod push;
 mod util;
-mod vec_env;
+mod values;
 mod weights;

@@ -305,7 +305,7 @@ fn the_native_forward_pass_follows_each_version() {
     assert!(live.is_native());
     let scenario = Arc::new(crossroads_sim::Scenario::builtin("left").expect("scenario"));
     let config = crossroads_sim::EnvConfig::for_actions(crossroads_sim::ActionSet::Ttg);
-    let mut envs = crossroads_actor::VecEnv::new(scenario, config, 6, 2, None).expect("envs");
+    let mut envs = crossroads_sim::VecEnv::new(scenario, config, 6, 2, None).expect("envs");
     for _ in 0..15 {
         envs.step(&[0, 1, 2, 3, 4, 0]).expect("step");
     }

@@ -1,5 +1,6 @@
 //! Acceptance tests of the simulator: car following, geometry, visibility,
-//! observations, emission, safety of traffic, determinism and baselines.
+//! observations, emission, safety of traffic, determinism and baselines;
+//! batched stepping in `vec_env.rs`.
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -7,6 +8,8 @@ use std::sync::Arc;
 use crossroads_sim::*;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
+
+mod vec_env;
 
 fn scenario(name: &str) -> Arc<Scenario> {
     Arc::new(Scenario::builtin(name).expect("built-in scenario"))

@@ -4,12 +4,11 @@
 
 use std::sync::Arc;
 
-use crossroads_sim::{Env, EnvConfig, ObsSpec, Outcome, Scenario, episode_seed};
 use crossroads_types::ObservationLayout;
 use crossroads_types::codec::{self, ObservationEncoding};
 use rayon::prelude::*;
 
-use crate::error::ActorError;
+use crate::{Env, EnvConfig, ObsSpec, Outcome, Scenario, SimError, episode_seed};
 
 /// How one episode ended, as the metrics and the log report it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -91,7 +90,7 @@ impl VecEnv {
         envs: usize,
         seed: u64,
         encoding: Option<ObservationEncoding>,
-    ) -> Result<Self, ActorError> {
+    ) -> Result<Self, SimError> {
         Self::with_range(scenario, config, 0..envs, seed, encoding)
     }
 
@@ -104,9 +103,9 @@ impl VecEnv {
         range: std::ops::Range<usize>,
         seed: u64,
         encoding: Option<ObservationEncoding>,
-    ) -> Result<Self, ActorError> {
+    ) -> Result<Self, SimError> {
         if range.is_empty() {
-            return Err(ActorError::Config(
+            return Err(SimError::VecEnv(
                 "at least one environment is needed".to_owned(),
             ));
         }
@@ -240,9 +239,9 @@ impl VecEnv {
     /// Applies `actions[i]` to environment `i`, all in parallel; resets
     /// those whose episode ended. Returns what each did; the observations
     /// are the new ones (the first of a new episode where one ended).
-    pub fn step(&mut self, actions: &[usize]) -> Result<&[EnvStep], ActorError> {
+    pub fn step(&mut self, actions: &[usize]) -> Result<&[EnvStep], SimError> {
         if actions.len() != self.slots.len() {
-            return Err(ActorError::Config(format!(
+            return Err(SimError::VecEnv(format!(
                 "{} actions for {} environments",
                 actions.len(),
                 self.slots.len()
@@ -258,7 +257,7 @@ impl VecEnv {
             .zip(actions.par_iter())
             .try_for_each(|(((slot, out), result), &action)| {
                 *result = slot.step(action, out, encoding, len)?;
-                Ok::<_, ActorError>(())
+                Ok::<_, SimError>(())
             })?;
         Ok(&self.results)
     }
@@ -290,7 +289,7 @@ impl Slot {
         out: &mut Vec<(u32, f32)>,
         encoding: Option<ObservationEncoding>,
         len: usize,
-    ) -> Result<EnvStep, ActorError> {
+    ) -> Result<EnvStep, SimError> {
         let r = self.env.step(action)?;
         let mut episode = None;
         if r.done {
