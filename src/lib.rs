@@ -9,7 +9,6 @@ pub mod cli;
 pub mod commands;
 pub mod experiments;
 pub mod network_policy;
-pub mod plot;
 pub mod progress;
 
 use std::process::ExitCode;

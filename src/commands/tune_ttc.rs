@@ -10,7 +10,7 @@ use anyhow::Context;
 use crossroads_sim::{Scenario, SweepPoint, TuneReport, default_thresholds, tune_ttc};
 
 use crate::cli::TuneTtcArgs;
-use crate::plot::{self, Series};
+use crossroads_draw::plot::{self, Series};
 use crate::progress;
 
 /// Runs the sweep, prints it, and writes CSV and PNG under `--out`.
@@ -161,5 +161,6 @@ fn figure(r: &TuneReport, path: &Path) -> anyhow::Result<()> {
             points,
             line: true,
         }],
-    )
+    )?;
+    Ok(())
 }

@@ -22,7 +22,7 @@ use super::report::title;
 use super::{Cell, Plan, behind_shield, evaluate_network, evaluate_policy};
 use crate::commands::train::write_atomic;
 use crate::experiments;
-use crate::plot::{self, Panel, Series};
+use crossroads_draw::plot::{self, Panel, Series};
 use crate::progress;
 
 /// How far the shield's sensor reaches here, m: every built-in lane starts
@@ -426,5 +426,6 @@ fn figure(path: &Path, r: &DriversResults, axis: Axis) -> anyhow::Result<()> {
             "Collision rate against the share of inattentive drivers (human drivers otherwise)"
         }
     };
-    plot::grid(path, Some(heading), 3, &panels)
+    plot::grid(path, Some(heading), 3, &panels)?;
+    Ok(())
 }

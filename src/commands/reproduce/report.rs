@@ -11,7 +11,7 @@ use super::paper::{self, FIG3_SCENARIOS, SCENARIOS};
 use super::{Cell, Plan, Results};
 use crate::cli::Part;
 use crate::commands::train::{curve_panel, write_atomic};
-use crate::plot::{self, Panel, Series};
+use crossroads_draw::plot::{self, Panel, Series};
 
 /// Writes every file of the report; returns their paths.
 pub fn write(out: &Path, plan: &Plan, r: &Results) -> anyhow::Result<Vec<PathBuf>> {
@@ -822,7 +822,8 @@ fn fig3(path: &Path, r: &Results) -> anyhow::Result<()> {
         )),
         2,
         &panels,
-    )
+    )?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ use crossroads_sim::{EvalReport, PolicySpec};
 use serde_json::json;
 
 use super::{Cell, Pair, Plan, Verdict};
-use crate::plot::{self, Panel, Series};
+use crossroads_draw::plot::{self, Panel, Series};
 
 /// How the check was made.
 #[derive(Debug, Clone)]

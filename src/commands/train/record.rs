@@ -9,7 +9,7 @@ use anyhow::Context;
 use prometheus::{Gauge, IntCounter, IntGauge, Registry};
 use serde::{Deserialize, Serialize};
 
-use crate::plot::{Panel, Series, grid};
+use crossroads_draw::plot::{Panel, Series, grid};
 
 /// One greedy evaluation of one weights version.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -281,7 +281,8 @@ pub fn plot_curve(path: &Path, title: &str, rows: &[Evaluation]) -> anyhow::Resu
         }],
         log_y: true,
     };
-    grid(path, None, 2, &[curve_panel(title, rows), collisions])
+    grid(path, None, 2, &[curve_panel(title, rows), collisions])?;
+    Ok(())
 }
 
 /// The learning curve of `rows` as one panel: greedy success, collision

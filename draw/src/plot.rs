@@ -1,26 +1,13 @@
-//! Figures as PNG files, drawn with plotters and an embedded DejaVu Sans
-//! font (no system fonts needed).
+//! Figures as PNG files: panels of labelled series in a grid.
 
 use std::path::Path;
-use std::sync::Once;
 
-use anyhow::{Context, anyhow};
 use plotters::coord::cartesian::Cartesian2d;
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 
-/// Font family name under which DejaVu Sans is registered.
-pub(crate) const FONT: &str = "sans-serif";
-
-pub(crate) fn register_font() {
-    static ONCE: Once = Once::new();
-    ONCE.call_once(|| {
-        // The embedded font is valid; a failure would only drop text.
-        let _ = plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular());
-    });
-}
+use crate::{DrawError, FONT, register_font};
 
 /// One labelled series of (x, y) points.
 #[derive(Debug, Clone)]
@@ -60,7 +47,7 @@ pub fn chart(
     x_label: &str,
     y_label: &str,
     series: &[Series],
-) -> anyhow::Result<()> {
+) -> Result<(), DrawError> {
     let panel = Panel {
         title: title.to_owned(),
         x_label: x_label.to_owned(),
@@ -74,32 +61,39 @@ pub fn chart(
 /// Panels in a grid of `cols` columns (each 800 x 560), under an optional
 /// overall title, written to `path` as PNG. Panels with nothing to plot
 /// are an error naming the panel.
-pub fn grid(path: &Path, title: Option<&str>, cols: usize, panels: &[Panel]) -> anyhow::Result<()> {
+pub fn grid(
+    path: &Path,
+    title: Option<&str>,
+    cols: usize,
+    panels: &[Panel],
+) -> Result<(), DrawError> {
     register_font();
     let cols = cols.clamp(1, panels.len().max(1));
     let rows = panels.len().div_ceil(cols).max(1);
     let head = if title.is_some() { 40 } else { 0 };
     let size = (800 * cols as u32, 560 * rows as u32 + head);
     let root = BitMapBackend::new(path, size).into_drawing_area();
-    let draw = |e: &dyn std::fmt::Display| anyhow!("drawing {}: {e}", path.display());
+    let draw = |e: &dyn std::fmt::Display| DrawError::draw(path, e);
     root.fill(&WHITE).map_err(|e| draw(&e))?;
     let body = match title {
         Some(t) => root.titled(t, (FONT, 28)).map_err(|e| draw(&e))?,
         None => root.clone(),
     };
     for (area, panel) in body.split_evenly((rows, cols)).iter().zip(panels) {
-        draw_panel(area, panel)
-            .map_err(|e| anyhow!("{} in {}: {e:#}", panel.title, path.display()))?;
+        draw_panel(area, panel).map_err(|message| DrawError::Panel {
+            panel: panel.title.clone(),
+            path: path.to_owned(),
+            message,
+        })?;
     }
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
+    root.present().map_err(|e| DrawError::write(path, e))?;
     Ok(())
 }
 
 fn draw_panel(
     area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
     panel: &Panel,
-) -> anyhow::Result<()> {
+) -> Result<(), String> {
     let series = &panel.series;
     let all = series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
@@ -110,7 +104,7 @@ fn draw_panel(
         y1 = y1.max(y);
     }
     if x0 > x1 {
-        return Err(anyhow!("nothing to plot"));
+        return Err("nothing to plot".to_owned());
     }
     let pad = |lo: f64, hi: f64| {
         if hi - lo < 1e-9 {
@@ -123,7 +117,7 @@ fn draw_panel(
         (lo - 0.05 * span, hi + 0.05 * span)
     };
     let (x0, x1) = pad(x0, x1);
-    let draw = |e: &dyn std::fmt::Display| anyhow!("{e}");
+    let draw = |e: &dyn std::fmt::Display| e.to_string();
     let mut builder = ChartBuilder::on(area);
     builder
         .caption(&panel.title, (FONT, 22))
@@ -151,11 +145,11 @@ fn fill<'a, Y>(
     mut chart: ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, Y>>,
     panel: &Panel,
     floor: Option<f64>,
-) -> anyhow::Result<()>
+) -> Result<(), String>
 where
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
-    let draw = |e: &dyn std::fmt::Display| anyhow!("{e}");
+    let draw = |e: &dyn std::fmt::Display| e.to_string();
     let series = &panel.series;
     chart
         .configure_mesh()
