@@ -3,13 +3,12 @@
 //!
 //! [`cli::Cli`] is the clap definition; [`run`] loads the layered
 //! configuration ([`crossroads_config::ConfigLoader`]), starts tracing and
-//! dispatches to the subcommand's module under [`commands`].
+//! dispatches: the roles, `config`, `doctor`, `health`, `checkpoints`,
+//! `render` and `docs` to their module under [`commands`], the experiment
+//! harness's commands to `crossroads_harness`.
 
 pub mod cli;
 pub mod commands;
-pub mod experiments;
-pub mod network_policy;
-pub mod progress;
 
 use std::process::ExitCode;
 
@@ -44,18 +43,18 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Config(args) => commands::config::run(&cli.global, &config, &args),
         Command::Doctor(args) => commands::doctor::run(&cli.global, &config, &args),
-        Command::Eval(args) => commands::eval::run(&args),
+        Command::Eval(args) => crossroads_harness::eval::run(&args),
         Command::Health(args) => commands::health::run(&config, &args),
-        Command::TuneTtc(args) => commands::tune_ttc::run(&args),
-        Command::SumoCheck(args) => commands::sumo_check::run(&args),
+        Command::TuneTtc(args) => crossroads_harness::tune_ttc::run(&args),
+        Command::SumoCheck(args) => crossroads_harness::sumo_check::run(&args),
         Command::Render(args) => commands::render::run(&args),
         Command::Replay(_) => commands::replay::run(&config),
-        Command::Bench(args) => commands::bench::run(&cli.global, &config, &args),
+        Command::Bench(args) => crossroads_harness::bench::run(&cli.global, &config, &args),
         Command::Learner(_) => commands::learner::run(&config),
         Command::Checkpoints(args) => commands::checkpoints::run(&config, &args),
         Command::Actor(args) => commands::actor::run(&config, &args),
-        Command::Train(args) => commands::train::run(&config, &args),
-        Command::Reproduce(args) => commands::reproduce::run(&cli.global, &args),
+        Command::Train(args) => crossroads_harness::train::run(&config, &args),
+        Command::Reproduce(args) => crossroads_harness::reproduce::run(&cli.global, &args),
         Command::Docs(args) => commands::docs::run(&args),
     }
 }

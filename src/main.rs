@@ -4,7 +4,8 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use crossroads::cli::{Cli, every_set};
+use crossroads::cli::Cli;
+use crossroads_harness::global::every_set;
 
 fn main() -> ExitCode {
     load_time_settings();

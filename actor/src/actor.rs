@@ -16,8 +16,8 @@ use crossroads_common::Shutdown;
 use crossroads_common::retry::Backoff;
 use crossroads_config::{ActorConfig, SimConfig, TransportConfig};
 use crossroads_sim::{
-    ActionSet, EnvConfig, EpisodeEnd, Policy, PolicyRng, PolicySpec, Scenario, SensedCar, ShieldParams,
-    check_go, episode_seed, sense, shield_fallback, splitmix64, VecEnv,
+    ActionSet, EnvConfig, EpisodeEnd, Policy, PolicyRng, PolicySpec, Scenario, SensedCar,
+    ShieldParams, VecEnv, check_go, episode_seed, sense, shield_fallback, splitmix64,
 };
 use crossroads_transport::grpc::ReplayClient;
 use crossroads_types::TransitionBatch;

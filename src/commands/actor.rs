@@ -4,8 +4,8 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use crossroads_config::Config;
+use crossroads_harness::role::{Role, block_on};
 
-use super::role::{Role, block_on};
 use crate::cli::ActorArgs;
 
 /// Acts until SIGINT/SIGTERM (or `--max-steps`), pushing transitions to the

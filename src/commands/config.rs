@@ -3,8 +3,9 @@
 use std::process::ExitCode;
 
 use crossroads_config::Config;
+use crossroads_harness::global::GlobalArgs;
 
-use crate::cli::{ConfigAction, ConfigArgs, GlobalArgs};
+use crate::cli::{ConfigAction, ConfigArgs};
 
 /// Prints or checks the configuration already loaded (loading it is where
 /// problems are found, so reaching here means it is valid).

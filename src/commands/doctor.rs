@@ -21,6 +21,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use crossroads_config::{Config, ConfigLoader, SimConfig};
+use crossroads_harness::experiments::{self, Experiment};
+use crossroads_harness::global::GlobalArgs;
 use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second_on};
 use crossroads_model::{
     CudaSupport, NativeMlp, NetworkSpec, Precision, QNetwork, Work, cpu_has_amx_bf16, device_name,
@@ -28,7 +30,7 @@ use crossroads_model::{
 use serde::Serialize;
 use tch::{Device, Tensor};
 
-use crate::cli::{DoctorArgs, GlobalArgs};
+use crate::cli::DoctorArgs;
 
 /// The built-in experiment `crossroads train` trains without flags (DQN-TTG
 /// on left), the base of `crossroads doctor` without a file.
@@ -152,11 +154,11 @@ pub fn loader(global: &GlobalArgs) -> ConfigLoader {
 
 /// [`DEFAULT_EXPERIMENT`] when neither `--config` nor `--experiment` is
 /// given.
-fn default_experiment(global: &GlobalArgs) -> Option<crate::experiments::Experiment> {
+fn default_experiment(global: &GlobalArgs) -> Option<Experiment> {
     if global.config.is_some() || global.experiment.is_some() {
         return None;
     }
-    crate::experiments::named(DEFAULT_EXPERIMENT)
+    experiments::named(DEFAULT_EXPERIMENT)
 }
 
 /// Prints the report.
@@ -242,7 +244,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &DoctorArgs) -> anyhow::R
         openmp: tch::utils::has_openmp(),
         openmp_wait_policy: std::env::var("OMP_WAIT_POLICY").unwrap_or_else(|_| "unset".into()),
         glibc_tunables: std::env::var("GLIBC_TUNABLES").unwrap_or_else(|_| "unset".into()),
-        network: super::bench::describe_network(&spec),
+        network: crossroads_harness::bench::describe_network(&spec),
         learner_precision: training.name(),
         actor_precision: acting.name(),
         amx_bf16: cpu_has_amx_bf16(),

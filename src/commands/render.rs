@@ -6,9 +6,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context, bail, ensure};
 use crossroads_draw::EpisodeView;
+use crossroads_harness::progress;
 
 use crate::cli::RenderArgs;
-use crate::progress;
 
 /// Picture formats, by the output file's extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,7 +54,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<ExitCode> {
             "--scale must be between 0.5 and 50 pixels per metre, got {scale}"
         );
     }
-    let loaded = super::eval::load(&args.run)?;
+    let loaded = crossroads_harness::eval::load(&args.run)?;
     let view = EpisodeView {
         seed: args.seed,
         trial: args.trial,

@@ -4,8 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use crossroads_config::Config;
-
-use super::role::{Role, block_on};
+use crossroads_harness::role::{Role, block_on};
 
 /// Serves the replay table until SIGINT/SIGTERM, then writes the last
 /// snapshot.

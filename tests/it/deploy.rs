@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use crossroads::commands::train::sum_metric;
+use crossroads_harness::train::sum_metric;
 use crossroads_test_support::gates::{self, Need};
 
 fn repo() -> &'static Path {

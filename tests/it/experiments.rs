@@ -82,7 +82,7 @@ fn every_target_follows_the_baselines_of_the_committed_report() {
             .unwrap_or_else(|| panic!("{}: no number at {what}", report.display()))
     };
     let mut checked = 0;
-    for e in crossroads::experiments::EXPERIMENTS {
+    for e in crossroads_harness::experiments::EXPERIMENTS {
         let c = ConfigLoader::new()
             .without_env()
             .base(e.name, e.toml)
@@ -140,8 +140,8 @@ fn every_target_follows_the_baselines_of_the_committed_report() {
 
 #[test]
 fn a_run_folder_is_named_after_its_experiment() {
-    use crossroads::commands::train::default_out;
-    for e in crossroads::experiments::EXPERIMENTS {
+    use crossroads_harness::train::default_out;
+    for e in crossroads_harness::experiments::EXPERIMENTS {
         let (actions, scenario) = e.name.split_once('-').expect("<actions>-<scenario>");
         assert_eq!(
             default_out(scenario, actions),

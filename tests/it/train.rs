@@ -8,7 +8,7 @@
 use std::path::Path;
 use std::process::Output;
 
-use crossroads::commands::train::{Evaluation, read_curve};
+use crossroads_harness::train::{Evaluation, read_curve};
 use crossroads_test_support::gates;
 
 /// Warm-up and evaluations of a run long enough to learn.

@@ -92,7 +92,7 @@ pub fn run(args: &DocsArgs) -> anyhow::Result<ExitCode> {
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
-        crate::commands::train::write_atomic(&path, g.text.as_bytes())?;
+        crossroads_harness::train::write_atomic(&path, g.text.as_bytes())?;
         eprintln!("wrote {}", path.display());
     }
     if stale.is_empty() {

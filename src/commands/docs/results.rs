@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use anyhow::Context;
 use serde_json::Value;
 
-use crate::commands::reproduce::paper;
+use crossroads_harness::reproduce::paper;
 
 /// The line that opens the generated block of the README.
 pub const BEGIN: &str =

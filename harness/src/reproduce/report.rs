@@ -6,12 +6,11 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use crossroads_draw::plot::{self, Panel, Series};
 
 use super::paper::{self, FIG3_SCENARIOS, SCENARIOS};
-use super::{Cell, Plan, Results};
-use crate::cli::Part;
-use crate::commands::train::{curve_panel, write_atomic};
-use crossroads_draw::plot::{self, Panel, Series};
+use super::{Cell, Part, Plan, Results};
+use crate::train::{curve_panel, write_atomic};
 
 /// Writes every file of the report; returns their paths.
 pub fn write(out: &Path, plan: &Plan, r: &Results) -> anyhow::Result<Vec<PathBuf>> {
@@ -829,8 +828,8 @@ fn fig3(path: &Path, r: &Results) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::commands::reproduce::RunRecord;
-    use crate::commands::train::record::Summary;
+    use crate::reproduce::RunRecord;
+    use crate::train::record::Summary;
 
     #[test]
     fn the_training_time_sums_every_run_and_names_this_calls_part() {

@@ -19,16 +19,70 @@ use std::process::{Command, ExitCode, Stdio};
 use std::sync::Arc;
 
 use anyhow::{Context, bail, ensure};
+use clap::Args;
 use crossroads_sim::{
     ActionSet, DriverPopulation, EvalConfig, EvalReport, Outcome, PolicySpec, Scenario,
     TrialResult, evaluate, summarize,
 };
 use serde::Deserialize;
 
-use crate::cli::SumoCheckArgs;
 use crate::progress;
 
 pub use compare::{Cell, Verdict};
+
+/// `crossroads sumo-check`.
+#[derive(Debug, Args)]
+pub struct SumoCheckArgs {
+    /// Comma-separated scenarios [default: right, left, left2, forward,
+    /// challenge, occluded-30, occluded-60, occluded-90; with --quick left,
+    /// challenge].
+    #[arg(long)]
+    pub scenarios: Option<String>,
+    /// TTC thresholds in seconds, start:end:step or a list [default: 0.5,
+    /// 1, 1.25, 1.5, 1.75, 2, 2.5, 3, 4 s; with creep 2.5, 3, 3.25, 3.5,
+    /// 4 s; with --quick 1.5, 2, 3 s].
+    #[arg(long)]
+    pub thresholds: Option<String>,
+    /// Trials per policy and scenario, in each simulator.
+    #[arg(long, short = 'n', default_value_t = 1_000)]
+    pub trials: u64,
+    /// Base seed (ours: trial seeds; SUMO: its --seed, plus the policy's
+    /// position in the list).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Comma-separated driver populations, each a preset (sumo, human, mixed) or
+    /// a drivers TOML file; every scenario runs under each, SUMO drawing
+    /// each car's vehicle type from the same bounds (docs/drivers.md gives
+    /// the mapping) [default: sumo,human].
+    #[arg(long)]
+    pub drivers: Option<String>,
+    /// A small check (what make test runs): left and challenge, three
+    /// thresholds and never-go, 300 trials, under each population.
+    #[arg(long)]
+    pub quick: bool,
+    /// Exit with status 1 when a gated cell drifts (success, collision or
+    /// time of a TTC policy outside the 99 % interval of the difference).
+    #[arg(long)]
+    pub strict: bool,
+    /// SUMO processes at a time (one scenario each).
+    #[arg(long, default_value_t = 2)]
+    pub jobs: usize,
+    /// Python with SUMO [default: $CROSSROADS_PYTHON, else .venv/bin/python3,
+    /// else python3].
+    #[arg(long)]
+    pub python: Option<PathBuf>,
+    /// The SUMO driver [default: scripts/sumo_check/check.py].
+    #[arg(long)]
+    pub script: Option<PathBuf>,
+    /// Folder for the report.
+    #[arg(long, default_value = "reports/sumo")]
+    pub out: PathBuf,
+    /// Keep the working files here: each scenario's export (JSON), its SUMO
+    /// network and routes, and SUMO's trials (JSON lines) [default: a
+    /// temporary folder, removed at the end].
+    #[arg(long)]
+    pub work: Option<PathBuf>,
+}
 
 /// Scenarios of the full check: every scenario of Tables I and II.
 pub const FULL_SCENARIOS: &[&str] = &[
@@ -189,7 +243,7 @@ pub fn run(args: &SumoCheckArgs) -> anyhow::Result<ExitCode> {
     let meta = report::Meta {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         sumo_version,
-        machine: super::train::machine(),
+        machine: crate::train::machine(),
         trials,
         seed: args.seed,
     };

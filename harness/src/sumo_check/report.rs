@@ -9,11 +9,11 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use crossroads_draw::plot::{self, Panel, Series};
 use crossroads_sim::{EvalReport, PolicySpec};
 use serde_json::json;
 
 use super::{Cell, Pair, Plan, Verdict};
-use crossroads_draw::plot::{self, Panel, Series};
 
 /// How the check was made.
 #[derive(Debug, Clone)]

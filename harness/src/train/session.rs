@@ -14,7 +14,7 @@ use indicatif::ProgressBar;
 use super::prepare::Run;
 use super::procs::{Addresses, RoleProcess, died, free_port, wait_ready};
 use super::record::{Curve, RunStatus, Summary, TrainMetrics, plot_curve};
-use crate::commands::role;
+use crate::role;
 
 /// Grace period for a role to stop after SIGTERM.
 pub const GRACE: Duration = Duration::from_secs(60);

@@ -23,7 +23,7 @@ macro_rules! experiments {
     ($($name:literal),* $(,)?) => {
         &[$(Experiment {
             name: $name,
-            toml: include_str!(concat!("../configs/experiments/", $name, ".toml")),
+            toml: include_str!(concat!("../../configs/experiments/", $name, ".toml")),
         }),*]
     };
 }

@@ -6,10 +6,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use crossroads_draw::plot::{Panel, Series, grid};
 use prometheus::{Gauge, IntCounter, IntGauge, Registry};
 use serde::{Deserialize, Serialize};
-
-use crossroads_draw::plot::{Panel, Series, grid};
 
 /// One greedy evaluation of one weights version.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -36,13 +36,45 @@ mod watch;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use clap::Args;
 use crossroads_config::{Config, ConfigLoader};
 
 pub use self::record::write_atomic;
 pub use self::record::{Evaluation, RunStatus, Summary, curve_panel, read_curve};
 pub use self::session::{machine, sum_metric};
-use super::role;
-use crate::cli::{GlobalArgs, TrainArgs};
+use crate::global::GlobalArgs;
+use crate::role;
+
+/// `crossroads train`. Each flag overrides the configuration key it names.
+#[derive(Debug, Clone, Args)]
+pub struct TrainArgs {
+    /// Scenario (sim.scenario).
+    #[arg(long, value_name = "NAME|FILE")]
+    pub scenario: Option<String>,
+    /// Action set: ttg, sequential or creep (sim.action_set; the
+    /// observation and the network follow).
+    #[arg(long, value_name = "SET")]
+    pub actions: Option<String>,
+    /// Actor processes (actor.count).
+    #[arg(long, value_name = "N")]
+    pub actors: Option<u32>,
+    /// Environments per actor (actor.envs).
+    #[arg(long, value_name = "M")]
+    pub envs: Option<usize>,
+    /// Update budget (learner.max_updates; 0 trains until Ctrl-C).
+    #[arg(long, value_name = "N")]
+    pub updates: Option<u64>,
+    /// Wall-clock budget in minutes (train.max_minutes).
+    #[arg(long, value_name = "MIN")]
+    pub minutes: Option<f64>,
+    /// Run folder [default: runs/<actions>-<scenario>].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Continue the run in the folder: its config.toml (unless --config),
+    /// newest checkpoint, replay snapshot, curve and clocks.
+    #[arg(long)]
+    pub resume: bool,
+}
 
 /// The run folder a run of `scenario` with `actions` gets by default:
 /// `runs/<actions>-<scenario>`, the built-in experiment's name (a scenario

@@ -52,7 +52,8 @@ fn script() -> Option<PathBuf> {
     if local.exists() {
         return Some(local);
     }
-    let beside = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(SCRIPT);
+    // The repository root, one folder above this crate.
+    let beside = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/..")).join(SCRIPT);
     beside.exists().then_some(beside)
 }
 

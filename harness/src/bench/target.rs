@@ -15,8 +15,8 @@ use std::time::Instant;
 use anyhow::Context;
 use serde_json::json;
 
-use crate::cli::GlobalArgs;
-use crate::commands::train::record::{RunStatus, Summary};
+use crate::global::GlobalArgs;
+use crate::train::record::{RunStatus, Summary};
 
 /// The experiment trained when neither `--config` nor `--experiment` is
 /// given (the one `make run` trains).
@@ -164,7 +164,7 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
             scratch.path().to_path_buf()
         }
     };
-    let machine = crate::commands::train::session::machine();
+    let machine = crate::train::session::machine();
     let load = super::load_average();
     let mut outcomes = Vec::new();
     for (i, &seed) in o.seeds.iter().enumerate() {

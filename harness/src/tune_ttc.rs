@@ -2,16 +2,50 @@
 //! lowest threshold with zero collisions).
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::Context;
-use crossroads_sim::{Scenario, SweepPoint, TuneReport, default_thresholds, tune_ttc};
-
-use crate::cli::TuneTtcArgs;
+use clap::Args;
 use crossroads_draw::plot::{self, Series};
+use crossroads_sim::{ActionSet, Scenario, SweepPoint, TuneReport, default_thresholds, tune_ttc};
+
+use crate::eval::parse_action_set;
 use crate::progress;
+
+/// `crossroads tune-ttc`.
+#[derive(Debug, Args)]
+pub struct TuneTtcArgs {
+    /// Scenario name or scenario TOML file.
+    #[arg(long, default_value = "left")]
+    pub scenario: String,
+    /// Who drives the traffic: sumo, human, mixed or a drivers TOML file
+    /// [default: the scenario's own]; the paper's rule then tunes TTC for
+    /// that population.
+    #[arg(long, value_name = "PRESET|FILE")]
+    pub drivers: Option<String>,
+    /// Action set the TTC rule drives.
+    #[arg(long, default_value = "ttg", value_parser = parse_action_set)]
+    pub actions: ActionSet,
+    /// Creep until the conflicting lanes are visible, then apply the rule
+    /// (TTC with creep, for occlusion scenarios).
+    #[arg(long)]
+    pub creep: bool,
+    /// Trials per threshold.
+    #[arg(long, short = 'n', default_value_t = 2_000)]
+    pub trials: u64,
+    /// Base seed, the same for every threshold.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Thresholds in seconds: start:end:step or a comma-separated list
+    /// [default: 0:10:0.25].
+    #[arg(long)]
+    pub thresholds: Option<String>,
+    /// Folder for tune-ttc[-creep]-<scenario>.csv and .png.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
 
 /// Runs the sweep, prints it, and writes CSV and PNG under `--out`.
 pub fn run(args: &TuneTtcArgs) -> anyhow::Result<ExitCode> {

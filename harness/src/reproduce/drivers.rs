@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use crossroads_common::Shutdown;
+use crossroads_draw::plot::{self, Panel, Series};
 use crossroads_sim::{
     ActionSet, Bounds, DriverPopulation, Scenario, ShieldParams, TuneReport, tune_ttc,
 };
@@ -20,10 +21,9 @@ use serde::Serialize;
 use super::paper::SCENARIOS;
 use super::report::title;
 use super::{Cell, Plan, behind_shield, evaluate_network, evaluate_policy};
-use crate::commands::train::write_atomic;
 use crate::experiments;
-use crossroads_draw::plot::{self, Panel, Series};
 use crate::progress;
+use crate::train::write_atomic;
 
 /// How far the shield's sensor reaches here, m: every built-in lane starts
 /// 150 m from the junction's centre, so it sees each lane whole, as the
@@ -136,7 +136,7 @@ pub fn evaluate(
         trials: plan.trials,
         seed: plan.seed,
         quick: plan.quick,
-        machine: crate::commands::train::machine(),
+        machine: crate::train::machine(),
         started,
         ..DriversResults::default()
     };

@@ -11,7 +11,7 @@
 //! (`report.rs`).
 
 mod drivers;
-pub(crate) mod paper;
+pub mod paper;
 mod report;
 
 use std::path::PathBuf;
@@ -20,6 +20,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
+use clap::Args;
 use crossroads_common::Shutdown;
 use crossroads_sim::{
     ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Policy, Scenario, ShieldCounters,
@@ -28,11 +29,68 @@ use crossroads_sim::{
 };
 use serde::Serialize;
 
-use super::train::{Evaluation, Summary, read_curve};
-use crate::cli::{GlobalArgs, Part, ReproduceArgs};
 use crate::experiments;
+use crate::global::GlobalArgs;
 use crate::network_policy::NetworkPolicy;
 use crate::progress;
+use crate::train::{Evaluation, Summary, read_curve};
+
+/// `crossroads reproduce`.
+#[derive(Debug, Clone, Args)]
+pub struct ReproduceArgs {
+    /// Report folder.
+    #[arg(long, default_value = "report", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Only these parts (repeat or comma-separate): table1, table2,
+    /// table3, fig3, drivers [default: all].
+    #[arg(long, value_delimiter = ',', value_name = "PART")]
+    pub only: Vec<Part>,
+    /// Wall-clock budget of each training run in minutes (on top of the
+    /// experiment's update budget; 0: the update budget alone).
+    #[arg(long, value_name = "MIN", default_value_t = 0.0)]
+    pub budget: f64,
+    /// Update budget of each training run (replaces the experiment's).
+    #[arg(long, value_name = "N")]
+    pub updates: Option<u64>,
+    /// Actor processes per training run (actor.count).
+    #[arg(long, value_name = "N")]
+    pub actors: Option<u32>,
+    /// Trials per table cell and per TTC threshold.
+    #[arg(long, short = 'n', default_value_t = 10_000)]
+    pub trials: u64,
+    /// Base seed of the evaluations (every method sees the same trials).
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Leave out DQN-Sequential (its runs are the longest).
+    #[arg(long)]
+    pub no_sequential: bool,
+    /// Only the baselines: the TTC cells and sweeps, without training or
+    /// evaluating any network (the DQN cells stay empty). For re-measuring
+    /// them after a change of the simulator, where the networks need
+    /// retraining anyway.
+    #[arg(long, conflicts_with = "quick")]
+    pub baselines_only: bool,
+    /// A minutes-long smoke version: tiny networks and budgets, 300 trials,
+    /// no DQN-Sequential. The numbers mean nothing; the pipeline is real.
+    #[arg(long)]
+    pub quick: bool,
+}
+
+/// A part of `crossroads reproduce`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Part {
+    /// Table I: TTC, DQN-Sequential and DQN-TTG on the five scenarios.
+    Table1,
+    /// Table II: occlusion, TTC with creep and the DQNs per wall length.
+    Table2,
+    /// Table III: DQN-TTG trained on one scenario, tested on each.
+    Table3,
+    /// Figure 3: TTC threshold sweeps with the DQN points.
+    Fig3,
+    /// Safety across drivers: every Table I scenario against the drivers'
+    /// reaction time and the share of inattentive drivers (drivers/).
+    Drivers,
+}
 
 /// Settings `--quick` adds to every run: a small network, short warm-up
 /// and frequent small evaluations.
@@ -360,7 +418,7 @@ pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode
         seed: plan.seed,
         quick: plan.quick,
         baselines_only: !plan.dqn,
-        machine: super::train::machine(),
+        machine: crate::train::machine(),
         started: now_utc(),
         trained,
         ..Results::default()

@@ -94,7 +94,7 @@ pub(super) fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
         .build()
         .context("starting the async runtime")?;
     let mut report = Report {
-        machine: crate::commands::train::session::machine(),
+        machine: crate::train::session::machine(),
         replay: Vec::new(),
         weights: None,
     };

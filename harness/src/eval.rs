@@ -10,6 +10,7 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use anyhow::Context;
+use clap::Args;
 use crossroads_sim::{
     ActionSet, Env, EnvConfig, EvalConfig, EvalReport, Interval, Outcome, Policy, RiskOptions,
     RiskReport, Scenario, ShieldCounters, ShieldParams, ShieldedPolicy, TrialResult, go_risk,
@@ -17,9 +18,98 @@ use crossroads_sim::{
 };
 use serde::Serialize;
 
-use crate::cli::{EvalArgs, PolicyArgs};
 use crate::network_policy::NetworkPolicy;
 use crate::progress;
+
+/// A policy driving an action set on a scenario (`eval`, `render`).
+#[derive(Debug, Args)]
+pub struct PolicyArgs {
+    /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, never (the ego
+    /// waits out the time limit: traffic alone), oracle:<futures> (sees
+    /// hidden cars and goes when going reaches the goal in every one of
+    /// that many futures: the upper bound under occlusion), or a trained
+    /// network: a checkpoint folder (runs/NAME/best,
+    /// runs/NAME/checkpoints/ckpt-...) or a weights .safetensors file;
+    /// several networks of the same kind joined by commas act on the mean
+    /// of their Q-values (an ensemble).
+    #[arg(long, short = 'p')]
+    pub policy: String,
+    /// Scenario: right, left, left2, forward, challenge, occluded,
+    /// occluded-<30|60|90>[-left|-right|-both], or a scenario TOML file.
+    #[arg(long, default_value = "left")]
+    pub scenario: String,
+    /// Who drives the traffic: sumo (SUMO's drivers, the paper's), human
+    /// (reaction 0.7-1.5 s and the rest as measured on roads;
+    /// docs/drivers.md), mixed (half each), or a drivers TOML file
+    /// [default: the scenario's own].
+    #[arg(long, value_name = "PRESET|FILE")]
+    pub drivers: Option<String>,
+    /// Action set the policy drives: ttg, creep or sequential [default: a
+    /// network's own; ttg for a rule].
+    #[arg(long, value_parser = parse_action_set)]
+    pub actions: Option<ActionSet>,
+    /// Put the policy behind the safety shield: each *go* is checked
+    /// against the cars the ego senses and phantom cars where its view
+    /// ends, and vetoed when any could come too close (ttg and creep
+    /// actions). Optionally override its assumptions, e.g.
+    /// `--shield margin_s=0.3,phantom_factor=1.1` (keys: speed_factor,
+    /// phantom_factor, slow_factor, margin_s, gap_m, follower_decel,
+    /// reaction_s, yield_decel, fall_in_decel, clear_s, hard_decel,
+    /// range_m, leader_decel, see_through; `yield_decel=4.5` counts on
+    /// comfortable braking only; `range_m=150` senses each lane whole, as
+    /// the TTC rule does; `see_through=1` lets walls hide nothing), or take
+    /// a driver population's worst bounds with `assume=human` (a preset or
+    /// a drivers file; the defaults assume SUMO's drivers).
+    #[arg(long, value_name = "ASSUMPTIONS", num_args = 0..=1, default_missing_value = "default")]
+    pub shield: Option<String>,
+    /// Number format of a network policy's trunk: f32 (the same result on
+    /// every machine), bf16, or auto (what a training run's actors use,
+    /// which is f32: auto picks bf16 only for the learner's updates).
+    #[arg(long, default_value = "f32", value_name = "auto|f32|bf16")]
+    pub precision: crossroads_config::PrecisionSetting,
+}
+
+/// `crossroads eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    pub run: PolicyArgs,
+    /// Number of trials.
+    #[arg(long, short = 'n', default_value_t = 10_000)]
+    pub trials: u64,
+    /// Base seed; the same seed gives the same result on any number of
+    /// threads.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print one JSON object (rates as fractions) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Also replay every *go* decision in K other traffic futures (the same
+    /// state, other random draws) and report how likely each was to
+    /// collide: collisions the state already decided are the policy's
+    /// mistakes, the rest its calculated risks (ttg and creep actions).
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub risk: Option<u32>,
+    /// With --risk: also try *go* in the same K futures once a second
+    /// while the policy waits or creeps, and report the chances it passed
+    /// up (waits where going reached the goal in every future): timeouts
+    /// that had one, and how late the policy went after its first. Tells a
+    /// too cautious network from traffic that left no gap. For a network,
+    /// also its Q(go) and best other value at safe and at doomed probes:
+    /// whether it tells them apart
+    #[arg(long, requires = "risk")]
+    pub missed: bool,
+    /// List the first N collided and the first N timed-out trials, each
+    /// as the `--seed S --trial I` that `crossroads render` draws (any
+    /// action set; with --json, as a `failures` object).
+    #[arg(long, value_name = "N", default_value_t = 0, conflicts_with = "risk")]
+    pub failures: usize,
+}
+
+/// An action set by name, for clap.
+pub(crate) fn parse_action_set(s: &str) -> Result<ActionSet, String> {
+    s.parse::<ActionSet>().map_err(|e| e.to_string())
+}
 
 /// What `--json` prints: the fields first, then the intervals.
 #[derive(Debug, Serialize)]
