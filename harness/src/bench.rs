@@ -190,7 +190,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Re
             json,
         } => target::run(
             global,
-            &target::Options {
+            &target::TimeToTargetOptions {
                 seeds: seeds.clone(),
                 minutes: *minutes,
                 out: out.clone(),

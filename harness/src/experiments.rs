@@ -28,6 +28,12 @@ macro_rules! experiments {
     };
 }
 
+/// The experiment `crossroads train` trains without a file or flags
+/// (DQN-TTG on left, what `make run` trains), and the base of `crossroads
+/// doctor` and `bench time-to-target` without `--config` or
+/// `--experiment`.
+pub const DEFAULT_EXPERIMENT: &str = "ttg-left";
+
 /// Every experiment of `configs/experiments/`.
 pub const EXPERIMENTS: &[Experiment] = experiments![
     "ttg-right",

@@ -14,12 +14,14 @@
 //!   ([`global::GlobalArgs`]);
 //!   [`network_policy`]: a trained Q-network (or an ensemble) as a
 //!   `crossroads_sim::Policy`; [`role`]: the runtime, signals and metrics
-//!   endpoint a role process shares; [`progress`]: progress bars.
+//!   endpoint a role process shares; [`child`]: this program started as
+//!   a child ([`child::TrainingChild`]); [`progress`]: progress bars.
 //!
 //! Each command's clap `Args` struct lives beside its `run`, so the binary
 //! only assembles them (`src/cli.rs`).
 
 pub mod bench;
+pub mod child;
 pub mod eval;
 pub mod experiments;
 pub mod global;

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use crossroads_config::{Config, ConfigLoader, SimConfig};
-use crossroads_harness::experiments::{self, Experiment};
+use crossroads_harness::experiments::{self, DEFAULT_EXPERIMENT, Experiment};
 use crossroads_harness::global::GlobalArgs;
 use crossroads_learner::bench::{SplitMix, median, synthetic_observation, updates_per_second_on};
 use crossroads_model::{
@@ -31,10 +31,6 @@ use serde::Serialize;
 use tch::{Device, Tensor};
 
 use crate::cli::DoctorArgs;
-
-/// The built-in experiment `crossroads train` trains without flags (DQN-TTG
-/// on left), the base of `crossroads doctor` without a file.
-const DEFAULT_EXPERIMENT: &str = "ttg-left";
 
 /// Timed calls per figure, after as many untimed ones.
 const CALLS: usize = 50;

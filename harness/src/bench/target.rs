@@ -6,25 +6,26 @@
 //! into its own run folder; the figures come from the run's
 //! `summary.json` (the confirming evaluation's clocks). A seed that does
 //! not confirm the target within `--minutes` counts as not reached, and
-//! the medians are over the seeds that reached it.
+//! the medians are over the seeds that reached it. Ctrl-C or SIGTERM
+//! stops the seed in training cleanly and ends the bench.
 
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode, Stdio};
+use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::Context;
+use crossroads_common::Shutdown;
 use serde_json::json;
 
+use crate::child::{self, TrainingChild, TrainingExit};
+use crate::experiments::{self, DEFAULT_EXPERIMENT};
 use crate::global::GlobalArgs;
 use crate::train::record::{RunStatus, Summary};
 
-/// The experiment trained when neither `--config` nor `--experiment` is
-/// given (the one `make run` trains).
-const DEFAULT_EXPERIMENT: &str = "ttg-left";
-
 /// What to measure.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub struct TimeToTargetOptions {
     /// Training seeds.
     pub seeds: Vec<u64>,
     /// Budget per seed.
@@ -61,11 +62,16 @@ fn median(mut values: Vec<f64>) -> Option<f64> {
 }
 
 /// Trains `seed` into `folder` and reads what its summary says.
-fn train(global: &GlobalArgs, o: &Options, seed: u64, folder: &Path) -> anyhow::Result<Outcome> {
-    let exe = std::env::current_exe().context("finding this program")?;
-    let mut cmd = Command::new(exe);
+fn train(
+    global: &GlobalArgs,
+    o: &TimeToTargetOptions,
+    seed: u64,
+    folder: &Path,
+    shutdown: &Shutdown,
+) -> anyhow::Result<Outcome> {
+    let mut args: Vec<OsString> = Vec::new();
     if let Some(file) = &global.config {
-        cmd.arg("--config").arg(file);
+        args.extend(["--config".into(), file.into()]);
     }
     let experiment = global.experiment.clone().or_else(|| {
         global
@@ -73,37 +79,37 @@ fn train(global: &GlobalArgs, o: &Options, seed: u64, folder: &Path) -> anyhow::
             .is_none()
             .then(|| DEFAULT_EXPERIMENT.to_owned())
     });
-    if let Some(e) = &experiment {
-        cmd.arg("--experiment").arg(e);
+    if let Some(e) = experiment {
+        args.extend(["--experiment".into(), e.into()]);
     }
     for set in &global.sets {
-        cmd.arg("--set").arg(set);
+        args.extend(["--set".into(), set.into()]);
     }
     for set in [
         format!("actor.seed={seed}"),
         format!("learner.seed={seed}"),
         "train.stop_at_target=true".to_owned(),
     ] {
-        cmd.arg("--set").arg(set);
+        args.extend(["--set".into(), set.into()]);
     }
-    cmd.arg("train")
-        .arg("--out")
-        .arg(folder)
-        .arg("--minutes")
-        .arg(o.minutes.to_string());
+    args.extend([
+        "train".into(),
+        "--out".into(),
+        folder.into(),
+        "--minutes".into(),
+        o.minutes.to_string().into(),
+    ]);
     std::fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
     let log_path = folder.with_extension("log");
     let log = std::fs::File::create(&log_path)
         .with_context(|| format!("creating {}", log_path.display()))?;
     let started = Instant::now();
-    let status = cmd
-        .env_remove("CROSSROADS_EXPERIMENT")
-        .env_remove("CROSSROADS_CONFIG")
-        .stdout(log.try_clone().context("the log file")?)
-        .stderr(log)
-        .stdin(Stdio::null())
-        .status()
-        .context("running crossroads train")?;
+    let status = match TrainingChild::start(&args, Some(log))?.wait(shutdown)? {
+        TrainingExit::Exited(status) => status,
+        TrainingExit::Stopped(status) => {
+            anyhow::bail!("stopped while training seed {seed} ({status})")
+        }
+    };
     let wall_seconds = started.elapsed().as_secs_f64();
     let summary = Summary::load(folder)?;
     let Some(summary) = summary.filter(|_| status.success()) else {
@@ -125,7 +131,7 @@ fn train(global: &GlobalArgs, o: &Options, seed: u64, folder: &Path) -> anyhow::
 }
 
 /// Trains every seed and prints the figures.
-pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
+pub fn run(global: &GlobalArgs, o: &TimeToTargetOptions) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(!o.seeds.is_empty(), "--seeds: give at least one seed");
     anyhow::ensure!(
         o.minutes > 0.0 && o.minutes.is_finite(),
@@ -141,7 +147,7 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
     // would train its whole budget for nothing.
     let loader = match (&global.experiment, &global.config) {
         (None, None) => {
-            let e = crate::experiments::named(DEFAULT_EXPERIMENT)
+            let e = experiments::named(DEFAULT_EXPERIMENT)
                 .context("the default experiment is built in")?;
             crossroads_config::ConfigLoader::new()
                 .base(format!("built-in experiment {}", e.name), e.toml)
@@ -164,6 +170,7 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
             scratch.path().to_path_buf()
         }
     };
+    let (_signals, shutdown) = child::on_signals()?;
     let machine = crate::train::session::machine();
     let load = super::load_average();
     let mut outcomes = Vec::new();
@@ -176,7 +183,7 @@ pub fn run(global: &GlobalArgs, o: &Options) -> anyhow::Result<ExitCode> {
             o.minutes,
             folder.display()
         );
-        let outcome = train(global, o, seed, &folder)?;
+        let outcome = train(global, o, seed, &folder, &shutdown)?;
         match outcome.reached {
             Some((secs, steps, updates)) => {
                 eprintln!("  reached after {secs:.0} s, {steps} env steps, {updates} updates")

@@ -14,10 +14,10 @@ mod drivers;
 pub mod paper;
 mod report;
 
+use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::time::Duration;
 
 use anyhow::Context;
 use clap::Args;
@@ -29,6 +29,7 @@ use crossroads_sim::{
 };
 use serde::Serialize;
 
+use crate::child::{self, TrainingChild, TrainingExit};
 use crate::experiments;
 use crate::global::GlobalArgs;
 use crate::network_policy::NetworkPolicy;
@@ -385,15 +386,7 @@ pub struct Results {
 /// Runs the reproduction.
 pub fn run(global: &GlobalArgs, args: &ReproduceArgs) -> anyhow::Result<ExitCode> {
     let plan = Plan::new(global, args)?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    let shutdown = {
-        let _enter = runtime.enter();
-        Shutdown::on_signals().context("installing the signal handlers")?
-    };
+    let (_signals, shutdown) = child::on_signals()?;
     let start = std::time::Instant::now();
     std::fs::create_dir_all(plan.out.join("runs"))
         .with_context(|| format!("creating {}", plan.out.display()))?;
@@ -481,10 +474,10 @@ fn check_mode(plan: &Plan) -> anyhow::Result<()> {
 }
 
 /// Trains member `member` (from 1) of `experiment` unless its run
-/// finished (then `false`: reused); resumes an interrupted one. Members after the first train from
-/// seed `member` (actor and learner). The child is `crossroads train` in
-/// this process group, so Ctrl-C reaches it too and it stops cleanly (a
-/// later reproduce resumes it).
+/// finished (then `false`: reused); resumes an interrupted one. Members
+/// after the first train from seed `member` (actor and learner). The
+/// child is a [`TrainingChild`]: Ctrl-C stops it cleanly, and a later
+/// reproduce resumes it.
 fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> anyhow::Result<bool> {
     let dir = plan.run_dir(&experiments::member_run(experiment, member));
     if let Some(s) = Summary::load(&dir)?
@@ -512,61 +505,47 @@ fn train(plan: &Plan, experiment: &str, member: u32, shutdown: &Shutdown) -> any
     let config = configs.join(format!("{experiment}.toml"));
     std::fs::write(&config, e.toml).with_context(|| format!("writing {}", config.display()))?;
 
-    let exe = std::env::current_exe().context("finding this program")?;
-    let mut cmd = std::process::Command::new(exe);
-    cmd.env_remove("CROSSROADS_EXPERIMENT");
+    let mut args: Vec<OsString> = Vec::new();
     for set in &plan.sets {
-        cmd.arg("--set").arg(set);
+        args.extend(["--set".into(), set.into()]);
     }
     if member > 1 {
         for key in ["actor.seed", "learner.seed"] {
-            cmd.arg("--set").arg(format!("{key}={member}"));
+            args.extend(["--set".into(), format!("{key}={member}").into()]);
         }
     }
-    cmd.arg("--config")
-        .arg(&config)
-        .arg("train")
-        .arg("--out")
-        .arg(&dir);
+    args.extend([
+        "--config".into(),
+        config.into(),
+        "train".into(),
+        "--out".into(),
+        dir.clone().into(),
+    ]);
     if plan.budget_minutes > 0.0 {
-        cmd.arg("--minutes").arg(plan.budget_minutes.to_string());
+        args.extend(["--minutes".into(), plan.budget_minutes.to_string().into()]);
     }
     if let Some(n) = plan.updates {
-        cmd.arg("--updates").arg(n.to_string());
+        args.extend(["--updates".into(), n.to_string().into()]);
     }
     if let Some(n) = plan.actors {
-        cmd.arg("--actors").arg(n.to_string());
+        args.extend(["--actors".into(), n.to_string().into()]);
     }
     if resume {
-        cmd.arg("--resume");
+        args.push("--resume".into());
         eprintln!("  resuming {}", dir.display());
     } else {
         eprintln!("  training into {}", dir.display());
     }
-    let mut child = cmd.spawn().context("starting crossroads train")?;
-    let status = loop {
-        if let Some(status) = child.try_wait().context("waiting for crossroads train")? {
-            break status;
-        }
-        if shutdown.is_triggered() {
-            // Ctrl-C reached the child as well; a SIGTERM sent to this
-            // process alone is passed on.
-            let _ = rustix::process::kill_process(
-                rustix::process::Pid::from_child(&child),
-                rustix::process::Signal::TERM,
-            );
-            let status = child.wait().context("waiting for crossroads train")?;
-            anyhow::bail!(
-                "stopped while training {experiment} ({status}); run the same command again to resume"
-            );
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    };
-    anyhow::ensure!(
-        status.success(),
-        "training {experiment} failed ({status}); its logs are in {}",
-        dir.join("logs").display()
-    );
+    match TrainingChild::start(&args, None)?.wait(shutdown)? {
+        TrainingExit::Stopped(status) => anyhow::bail!(
+            "stopped while training {experiment} ({status}); run the same command again to resume"
+        ),
+        TrainingExit::Exited(status) => anyhow::ensure!(
+            status.success(),
+            "training {experiment} failed ({status}); its logs are in {}",
+            dir.join("logs").display()
+        ),
+    }
     Ok(true)
 }
 

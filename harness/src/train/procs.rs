@@ -1,12 +1,13 @@
 //! The role processes of a training run: this very binary started as
 //! `crossroads replay`, `learner` and `actor`, each in its own process
 //! group (so Ctrl-C reaches only `train`, which then stops them in order),
-//! each logging into its own file under the run folder; the addresses they
+//! each logging into its own file under the run folder and inheriting what
+//! every child of this program does (`crate::child`); the addresses they
 //! are given, and waiting until one answers.
 
 use std::net::{SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -53,7 +54,7 @@ impl RoleProcess {
         let err = file
             .try_clone()
             .with_context(|| format!("opening {}", log.display()))?;
-        let mut cmd = Command::new(exe);
+        let mut cmd = crate::child::crossroads(exe);
         cmd.arg("--config")
             .arg(config)
             .args(args)
