@@ -8,7 +8,7 @@ use clap::{Args, Parser, Subcommand};
 use crossroads_config::ConfigLoader;
 use crossroads_harness::bench::BenchArgs;
 use crossroads_harness::eval::{EvalArgs, PolicyArgs};
-use crossroads_harness::global::GlobalArgs;
+use crossroads_harness::global::{GlobalArgs, KeyFlag, given, layer, with_keys};
 use crossroads_harness::reproduce::ReproduceArgs;
 use crossroads_harness::sumo_check::SumoCheckArgs;
 use crossroads_harness::train::TrainArgs;
@@ -24,6 +24,17 @@ pub struct Cli {
     pub global: GlobalArgs,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// The command line as it is parsed and documented: [`Cli`], each flag
+/// that sets a configuration key naming it in its help.
+pub fn command() -> clap::Command {
+    use clap::CommandFactory;
+    Cli::command()
+        .mut_subcommand("replay", |c| with_keys(c, ReplayArgs::KEYS))
+        .mut_subcommand("learner", |c| with_keys(c, LearnerArgs::KEYS))
+        .mut_subcommand("actor", |c| with_keys(c, ActorArgs::KEYS))
+        .mut_subcommand("train", |c| with_keys(c, TrainArgs::KEYS))
 }
 
 #[derive(Debug, Subcommand)]
@@ -149,34 +160,34 @@ pub struct DocsArgs {
 /// `[transport]`) key it names.
 #[derive(Debug, Clone, Args)]
 pub struct ActorArgs {
-    /// Scenario of the environments (sim.scenario).
+    /// Scenario of the environments.
     #[arg(long, value_name = "NAME|FILE")]
     pub scenario: Option<String>,
-    /// Action set: ttg, sequential or creep (sim.action_set).
+    /// Action set: ttg, sequential or creep.
     #[arg(long, value_name = "SET")]
     pub actions: Option<String>,
-    /// Environments stepped in parallel (actor.envs).
+    /// Environments stepped in parallel.
     #[arg(long, value_name = "M")]
     pub envs: Option<usize>,
-    /// This actor's index i for the epsilon ladder (actor.index).
+    /// This actor's index i for the epsilon ladder.
     #[arg(long, value_name = "I")]
     pub index: Option<u32>,
-    /// Number of actors N in the run (actor.count).
+    /// Number of actors N in the run.
     #[arg(long, value_name = "N")]
     pub count: Option<u32>,
-    /// How batches reach the replay: grpc or shm (actor.transport).
+    /// How batches reach the replay: grpc or shm.
     #[arg(long, value_name = "grpc|shm")]
     pub transport: Option<String>,
-    /// How weights arrive: grpc or shm (actor.weights).
+    /// How weights arrive: grpc or shm.
     #[arg(long, value_name = "grpc|shm")]
     pub weights: Option<String>,
-    /// The replay server (transport.replay_endpoint).
+    /// The replay server.
     #[arg(long, value_name = "URL")]
     pub replay: Option<String>,
-    /// The learner (transport.learner_endpoint).
+    /// The learner.
     #[arg(long, value_name = "URL")]
     pub learner: Option<String>,
-    /// Act greedily and push nothing (actor.eval).
+    /// Act greedily and push nothing.
     #[arg(long)]
     pub eval: bool,
     /// Stop after this many vectorized steps.
@@ -185,34 +196,35 @@ pub struct ActorArgs {
 }
 
 impl ActorArgs {
+    /// The flags that set a configuration key.
+    pub const KEYS: &'static [KeyFlag<Self>] = &[
+        KeyFlag::value("scenario", "sim.scenario", |a, k, l| {
+            given(l, k, &a.scenario)
+        }),
+        KeyFlag::value("actions", "sim.action_set", |a, k, l| {
+            given(l, k, &a.actions)
+        }),
+        KeyFlag::value("envs", "actor.envs", |a, k, l| given(l, k, &a.envs)),
+        KeyFlag::value("index", "actor.index", |a, k, l| given(l, k, &a.index)),
+        KeyFlag::value("count", "actor.count", |a, k, l| given(l, k, &a.count)),
+        KeyFlag::value("transport", "actor.transport", |a, k, l| {
+            given(l, k, &a.transport)
+        }),
+        KeyFlag::value("weights", "actor.weights", |a, k, l| {
+            given(l, k, &a.weights)
+        }),
+        KeyFlag::value("replay", "transport.replay_endpoint", |a, k, l| {
+            given(l, k, &a.replay)
+        }),
+        KeyFlag::value("learner", "transport.learner_endpoint", |a, k, l| {
+            given(l, k, &a.learner)
+        }),
+        KeyFlag::on("eval", "actor.eval", |a| a.eval),
+    ];
+
     /// Layers these flags over `loader`.
-    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
-        let text = [
-            ("sim.scenario", &self.scenario),
-            ("sim.action_set", &self.actions),
-            ("actor.transport", &self.transport),
-            ("actor.weights", &self.weights),
-            ("transport.replay_endpoint", &self.replay),
-            ("transport.learner_endpoint", &self.learner),
-        ];
-        for (key, value) in text {
-            if let Some(v) = value {
-                loader = loader.flag(key, v);
-            }
-        }
-        if let Some(v) = self.envs {
-            loader = loader.flag("actor.envs", v);
-        }
-        if let Some(v) = self.index {
-            loader = loader.flag("actor.index", v);
-        }
-        if let Some(v) = self.count {
-            loader = loader.flag("actor.count", v);
-        }
-        if self.eval {
-            loader = loader.flag("actor.eval", true);
-        }
-        loader
+    pub fn apply(&self, loader: ConfigLoader) -> ConfigLoader {
+        layer(self, Self::KEYS, loader)
     }
 }
 
@@ -220,50 +232,48 @@ impl ActorArgs {
 /// `[transport]`) key it names.
 #[derive(Debug, Clone, Args)]
 pub struct LearnerArgs {
-    /// gRPC address to serve on (learner.listen); port 0 picks a free port.
+    /// gRPC address to serve on; port 0 picks a free port.
     #[arg(long, value_name = "ADDR")]
     pub listen: Option<std::net::SocketAddr>,
-    /// The replay server to sample from (transport.replay_endpoint).
+    /// The replay server to sample from.
     #[arg(long, value_name = "URL")]
     pub replay: Option<String>,
-    /// Directory for checkpoints, resumed from at start
-    /// (learner.checkpoint_dir).
+    /// Directory for checkpoints, resumed from at start.
     #[arg(long, value_name = "DIR")]
     pub checkpoint_dir: Option<PathBuf>,
-    /// Stop after this many updates (learner.max_updates).
+    /// Stop after this many updates.
     #[arg(long, value_name = "N")]
     pub max_updates: Option<u64>,
-    /// Start fresh even if checkpoints exist (learner.resume = false).
+    /// Start fresh even if checkpoints exist.
     #[arg(long)]
     pub no_resume: bool,
-    /// Do not publish weights over iceoryx2 shared memory
-    /// (learner.shm_publish = false).
+    /// Do not publish weights over iceoryx2 shared memory.
     #[arg(long)]
     pub no_shm: bool,
 }
 
 impl LearnerArgs {
+    /// The flags that set a configuration key.
+    pub const KEYS: &'static [KeyFlag<Self>] = &[
+        KeyFlag::value("listen", "learner.listen", |a, k, l| {
+            given(l, k, &a.listen.map(|v| v.to_string()))
+        }),
+        KeyFlag::value("replay", "transport.replay_endpoint", |a, k, l| {
+            given(l, k, &a.replay)
+        }),
+        KeyFlag::value("checkpoint_dir", "learner.checkpoint_dir", |a, k, l| {
+            given(l, k, &a.checkpoint_dir)
+        }),
+        KeyFlag::value("max_updates", "learner.max_updates", |a, k, l| {
+            given(l, k, &a.max_updates)
+        }),
+        KeyFlag::off("no_resume", "learner.resume", |a| a.no_resume),
+        KeyFlag::off("no_shm", "learner.shm_publish", |a| a.no_shm),
+    ];
+
     /// Layers these flags over `loader`.
-    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
-        if let Some(v) = self.listen {
-            loader = loader.flag("learner.listen", v.to_string());
-        }
-        if let Some(v) = &self.replay {
-            loader = loader.flag("transport.replay_endpoint", v);
-        }
-        if let Some(v) = &self.checkpoint_dir {
-            loader = loader.flag("learner.checkpoint_dir", v);
-        }
-        if let Some(v) = self.max_updates {
-            loader = loader.flag("learner.max_updates", v);
-        }
-        if self.no_resume {
-            loader = loader.flag("learner.resume", false);
-        }
-        if self.no_shm {
-            loader = loader.flag("learner.shm_publish", false);
-        }
-        loader
+    pub fn apply(&self, loader: ConfigLoader) -> ConfigLoader {
+        layer(self, Self::KEYS, loader)
     }
 }
 
@@ -401,47 +411,45 @@ pub struct DoctorArgs {
 /// name from the file, the environment and --set.
 #[derive(Debug, Clone, Args)]
 pub struct ReplayArgs {
-    /// gRPC address to serve on (replay.listen); port 0 picks a free port.
+    /// gRPC address to serve on; port 0 picks a free port.
     #[arg(long, value_name = "ADDR")]
     pub listen: Option<std::net::SocketAddr>,
-    /// Directory for snapshots, restored at start (replay.snapshot_dir).
+    /// Directory for snapshots, restored at start.
     #[arg(long, value_name = "DIR")]
     pub snapshot_dir: Option<PathBuf>,
-    /// Items the table holds before evicting the oldest (replay.capacity).
+    /// Items the table holds before evicting the oldest.
     #[arg(long, value_name = "N")]
     pub capacity: Option<u64>,
-    /// Name of the table (replay.table).
+    /// Name of the table.
     #[arg(long, value_name = "NAME")]
     pub table: Option<String>,
-    /// Do not take batches over iceoryx2 shared memory (replay.shm_ingest).
+    /// Do not take batches over iceoryx2 shared memory.
     #[arg(long)]
     pub no_shm: bool,
-    /// Start empty even if snapshots exist (replay.restore = false).
+    /// Start empty even if snapshots exist.
     #[arg(long)]
     pub no_restore: bool,
 }
 
 impl ReplayArgs {
+    /// The flags that set a configuration key.
+    pub const KEYS: &'static [KeyFlag<Self>] = &[
+        KeyFlag::value("listen", "replay.listen", |a, k, l| {
+            given(l, k, &a.listen.map(|v| v.to_string()))
+        }),
+        KeyFlag::value("snapshot_dir", "replay.snapshot_dir", |a, k, l| {
+            given(l, k, &a.snapshot_dir)
+        }),
+        KeyFlag::value("capacity", "replay.capacity", |a, k, l| {
+            given(l, k, &a.capacity)
+        }),
+        KeyFlag::value("table", "replay.table", |a, k, l| given(l, k, &a.table)),
+        KeyFlag::off("no_shm", "replay.shm_ingest", |a| a.no_shm),
+        KeyFlag::off("no_restore", "replay.restore", |a| a.no_restore),
+    ];
+
     /// Layers these flags over `loader`.
-    pub fn apply(&self, mut loader: ConfigLoader) -> ConfigLoader {
-        if let Some(v) = self.listen {
-            loader = loader.flag("replay.listen", v.to_string());
-        }
-        if let Some(v) = &self.snapshot_dir {
-            loader = loader.flag("replay.snapshot_dir", v);
-        }
-        if let Some(v) = self.capacity {
-            loader = loader.flag("replay.capacity", v);
-        }
-        if let Some(v) = &self.table {
-            loader = loader.flag("replay.table", v);
-        }
-        if self.no_shm {
-            loader = loader.flag("replay.shm_ingest", false);
-        }
-        if self.no_restore {
-            loader = loader.flag("replay.restore", false);
-        }
-        loader
+    pub fn apply(&self, loader: ConfigLoader) -> ConfigLoader {
+        layer(self, Self::KEYS, loader)
     }
 }

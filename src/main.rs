@@ -3,13 +3,16 @@
 
 use std::process::ExitCode;
 
-use clap::Parser;
+use clap::FromArgMatches;
 use crossroads::cli::Cli;
 use crossroads_harness::global::every_set;
 
 fn main() -> ExitCode {
     load_time_settings();
-    let mut cli = Cli::parse();
+    // Parsed with the flags' configuration keys in their help.
+    let mut parser = crossroads::cli::command();
+    let mut cli = Cli::from_arg_matches(&parser.get_matches_mut())
+        .unwrap_or_else(|e| e.format(&mut parser).exit());
     // clap keeps only the last group of a global flag given both before
     // and after the subcommand; every --set counts.
     cli.global.sets = every_set(std::env::args_os().skip(1));

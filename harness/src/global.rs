@@ -93,3 +93,109 @@ fn experiment_name(name: &str) -> Result<String, String> {
         )),
     }
 }
+
+/// A flag that sets one configuration key: its clap id (the field's
+/// name), the key, and how a parsed command line sets it. A command lists
+/// its flags in one table, which both layers them ([`layer`]) and names
+/// each key in its flag's help ([`with_keys`]), so a key is written once.
+#[derive(Debug)]
+pub struct KeyFlag<A> {
+    id: &'static str,
+    key: &'static str,
+    setting: Setting<A>,
+}
+
+#[derive(Debug)]
+enum Setting<A> {
+    /// Layers the flag's value, when given, at the key ([`given`]).
+    Value(fn(&A, &str, ConfigLoader) -> ConfigLoader),
+    /// A switch: when it is on, the key gets this value.
+    Switch(fn(&A) -> bool, bool),
+}
+
+impl<A> KeyFlag<A> {
+    /// A flag whose value is the key's.
+    pub const fn value(
+        id: &'static str,
+        key: &'static str,
+        set: fn(&A, &str, ConfigLoader) -> ConfigLoader,
+    ) -> Self {
+        Self {
+            id,
+            key,
+            setting: Setting::Value(set),
+        }
+    }
+
+    /// A switch that sets the key to true.
+    pub const fn on(id: &'static str, key: &'static str, given: fn(&A) -> bool) -> Self {
+        Self {
+            id,
+            key,
+            setting: Setting::Switch(given, true),
+        }
+    }
+
+    /// A switch that sets the key to false (`--no-...`).
+    pub const fn off(id: &'static str, key: &'static str, given: fn(&A) -> bool) -> Self {
+        Self {
+            id,
+            key,
+            setting: Setting::Switch(given, false),
+        }
+    }
+
+    /// What the flag's help says of its key: `(key)`, or `(key = false)`
+    /// for a switch that turns it off.
+    fn named(&self) -> String {
+        match self.setting {
+            Setting::Switch(_, false) => format!("({} = false)", self.key),
+            _ => format!("({})", self.key),
+        }
+    }
+}
+
+/// `value` at `key` over `loader`, when given.
+pub fn given(
+    loader: ConfigLoader,
+    key: &str,
+    value: &Option<impl serde::Serialize>,
+) -> ConfigLoader {
+    match value {
+        Some(v) => loader.flag(key, v),
+        None => loader,
+    }
+}
+
+/// The flags of `table` that `args` gives, layered over `loader` in the
+/// table's order.
+pub fn layer<A>(args: &A, table: &[KeyFlag<A>], mut loader: ConfigLoader) -> ConfigLoader {
+    for flag in table {
+        loader = match flag.setting {
+            Setting::Value(set) => set(args, flag.key, loader),
+            Setting::Switch(on, value) if on(args) => loader.flag(flag.key, value),
+            Setting::Switch(..) => loader,
+        };
+    }
+    loader
+}
+
+/// `cmd` with each flag of `table` naming its key at the end of its help.
+/// Panics if `table` names a flag `cmd` lacks (a test parses the command
+/// line).
+pub fn with_keys<A>(cmd: clap::Command, table: &[KeyFlag<A>]) -> clap::Command {
+    table.iter().fold(cmd, |cmd, flag| {
+        let named = flag.named();
+        cmd.mut_arg(flag.id, |arg| {
+            let help = arg
+                .get_help()
+                .map_or_else(|| named.clone(), |h| format!("{h} {named}"));
+            let long = arg.get_long_help().map(|h| format!("{h} {named}"));
+            let arg = arg.help(help);
+            match long {
+                Some(long) => arg.long_help(long),
+                None => arg,
+            }
+        })
+    })
+}

@@ -42,29 +42,29 @@ use crossroads_config::{Config, ConfigLoader};
 pub use self::record::write_atomic;
 pub use self::record::{Evaluation, RunStatus, Summary, curve_panel, read_curve};
 pub use self::session::{machine, sum_metric};
-use crate::global::GlobalArgs;
+use crate::global::{GlobalArgs, KeyFlag, given, layer};
 use crate::role;
 
 /// `crossroads train`. Each flag overrides the configuration key it names.
 #[derive(Debug, Clone, Args)]
 pub struct TrainArgs {
-    /// Scenario (sim.scenario).
+    /// Scenario.
     #[arg(long, value_name = "NAME|FILE")]
     pub scenario: Option<String>,
-    /// Action set: ttg, sequential or creep (sim.action_set; the
-    /// observation and the network follow).
+    /// Action set: ttg, sequential or creep; the observation and the
+    /// network follow.
     #[arg(long, value_name = "SET")]
     pub actions: Option<String>,
-    /// Actor processes (actor.count).
+    /// Actor processes.
     #[arg(long, value_name = "N")]
     pub actors: Option<u32>,
-    /// Environments per actor (actor.envs).
+    /// Environments per actor.
     #[arg(long, value_name = "M")]
     pub envs: Option<usize>,
-    /// Update budget (learner.max_updates; 0 trains until Ctrl-C).
+    /// Update budget; 0 trains until Ctrl-C.
     #[arg(long, value_name = "N")]
     pub updates: Option<u64>,
-    /// Wall-clock budget in minutes (train.max_minutes).
+    /// Wall-clock budget in minutes.
     #[arg(long, value_name = "MIN")]
     pub minutes: Option<f64>,
     /// Run folder [default: runs/<actions>-<scenario>].
@@ -87,6 +87,24 @@ pub fn default_out(scenario: &str, actions: &str) -> PathBuf {
 }
 
 impl TrainArgs {
+    /// The flags that set a configuration key.
+    pub const KEYS: &'static [KeyFlag<Self>] = &[
+        KeyFlag::value("scenario", "sim.scenario", |a, k, l| {
+            given(l, k, &a.scenario)
+        }),
+        KeyFlag::value("actions", "sim.action_set", |a, k, l| {
+            given(l, k, &a.actions)
+        }),
+        KeyFlag::value("actors", "actor.count", |a, k, l| given(l, k, &a.actors)),
+        KeyFlag::value("envs", "actor.envs", |a, k, l| given(l, k, &a.envs)),
+        KeyFlag::value("updates", "learner.max_updates", |a, k, l| {
+            given(l, k, &a.updates)
+        }),
+        KeyFlag::value("minutes", "train.max_minutes", |a, k, l| {
+            given(l, k, &a.minutes)
+        }),
+    ];
+
     /// The run folder these flags name, before the config is read.
     fn out_dir(&self) -> PathBuf {
         self.out.clone().unwrap_or_else(|| {
@@ -121,25 +139,7 @@ impl TrainArgs {
         {
             loader = loader.base(format!("built-in experiment {}", e.name), e.toml);
         }
-        if let Some(s) = &self.scenario {
-            loader = loader.flag("sim.scenario", s);
-        }
-        if let Some(a) = &self.actions {
-            loader = loader.flag("sim.action_set", a);
-        }
-        if let Some(n) = self.actors {
-            loader = loader.flag("actor.count", n);
-        }
-        if let Some(n) = self.envs {
-            loader = loader.flag("actor.envs", n);
-        }
-        if let Some(n) = self.updates {
-            loader = loader.flag("learner.max_updates", n);
-        }
-        if let Some(m) = self.minutes {
-            loader = loader.flag("train.max_minutes", m);
-        }
-        loader
+        layer(self, Self::KEYS, loader)
     }
 }
 

@@ -3,13 +3,11 @@
 
 use std::fmt::Write as _;
 
-use clap::{Arg, CommandFactory};
-
-use crate::cli::Cli;
+use clap::Arg;
 
 /// The CLI reference as Markdown.
 pub fn reference() -> String {
-    let mut root = Cli::command();
+    let mut root = crate::cli::command();
     root.build();
     let mut w = String::new();
     w.push_str(
