@@ -13,6 +13,7 @@
 mod drivers;
 pub mod paper;
 mod report;
+mod table;
 
 use std::ffi::OsString;
 use std::path::PathBuf;

@@ -9,6 +9,7 @@ use anyhow::Context;
 use crossroads_draw::plot::{self, Panel, Series};
 
 use super::paper::{self, FIG3_SCENARIOS, SCENARIOS};
+use super::table::{Comparison, ComparisonRow, Entry, Method, num, pair};
 use super::{Cell, Part, Plan, Results};
 use crate::train::{curve_panel, write_atomic};
 
@@ -21,11 +22,13 @@ pub fn write(out: &Path, plan: &Plan, r: &Results) -> anyhow::Result<Vec<PathBuf
         written.push(path);
         Ok(())
     };
-    if plan.wants(Part::Table1) {
-        put("table1.csv", table1_csv(r))?;
+    let table1 = plan.wants(Part::Table1).then(|| table1(r));
+    let table2 = plan.wants(Part::Table2).then(|| table2(r));
+    if let Some(t) = &table1 {
+        put("table1.csv", t.to_csv())?;
     }
-    if plan.wants(Part::Table2) {
-        put("table2.csv", table2_csv(r))?;
+    if let Some(t) = &table2 {
+        put("table2.csv", t.to_csv())?;
     }
     if plan.wants(Part::Table3) {
         put("table3.csv", table3_csv(r))?;
@@ -35,7 +38,10 @@ pub fn write(out: &Path, plan: &Plan, r: &Results) -> anyhow::Result<Vec<PathBuf
         "results.json",
         serde_json::to_string_pretty(r).context("results as JSON")?,
     )?;
-    put("README.md", markdown(plan, r))?;
+    put(
+        "README.md",
+        markdown(plan, r, table1.as_ref(), table2.as_ref()),
+    )?;
     if plan.wants(Part::Fig3) {
         let path = out.join("fig3.png");
         fig3(&path, r)?;
@@ -79,16 +85,8 @@ pub(super) fn title(s: &str) -> String {
     })
 }
 
-fn num(v: Option<f64>, decimals: usize) -> String {
-    v.map_or("–".to_owned(), |v| format!("{v:.decimals$}"))
-}
-
-/// `ours (paper)`, both to `decimals` places.
-fn pair(ours: Option<f64>, paper: f64, decimals: usize) -> String {
-    format!("{} ({paper:.decimals$})", num(ours, decimals))
-}
-
-/// The metrics of a cell: success %, collision %, time s, brake s.
+/// Our metrics of a cell, in the tables' order: success %, collision %,
+/// time s, brake s.
 fn metrics(c: Option<&Cell>) -> [Option<f64>; 4] {
     [
         c.map(|c| c.success),
@@ -98,92 +96,101 @@ fn metrics(c: Option<&Cell>) -> [Option<f64>; 4] {
     ]
 }
 
-const METRICS1: [(&str, usize); 4] = [
-    ("success %", 2),
-    ("collision %", 2),
-    ("time s", 2),
-    ("brake s", 2),
-];
-
-fn paper1(p: &paper::PaperRow1) -> [f64; 4] {
-    [p.success, p.collision, p.time, p.brake]
+const fn method(csv: &'static str, heading: Option<&'static str>) -> Method {
+    Method { csv, heading }
 }
 
-fn paper2(p: &paper::PaperRow2) -> [f64; 3] {
-    [p.success, p.collision, p.time]
-}
-
-/// One CSV line per metric of `cell` (as many as the table has):
-/// `key,method,metric,ours,paper` (paper empty for a method it lacks).
-fn csv_cells(
-    out: &mut String,
-    key: &dyn std::fmt::Display,
-    method: &str,
-    cell: Option<&Cell>,
-    theirs: &[Option<f64>],
-) {
-    let ours = metrics(cell);
-    let text = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
-    for (k, (metric, _)) in METRICS1.iter().take(theirs.len()).enumerate() {
-        let _ = writeln!(
-            out,
-            "{key},{method},{},{},{}",
-            metric.replace(' ', "_"),
-            text(ours[k]),
-            text(theirs[k])
-        );
+/// Table I: TTC, DQN-Sequential and DQN-TTG beside the paper's, and
+/// DQN-TTG behind the shield, for each of the paper's scenarios measured.
+fn table1(r: &Results) -> Comparison {
+    let rows = r
+        .table1
+        .iter()
+        .filter_map(|row| {
+            let i = SCENARIOS.iter().position(|s| *s == row.scenario)?;
+            let paper = |m: usize| {
+                let p = &paper::TABLE1[i][m];
+                Some(vec![p.success, p.collision, p.time, p.brake])
+            };
+            let entry = |cell: &Option<Cell>, paper| Entry {
+                ours: metrics(cell.as_ref()),
+                paper,
+            };
+            Some(ComparisonRow {
+                key: row.scenario.clone(),
+                label: title(&row.scenario),
+                entries: vec![
+                    entry(&row.ttc, paper(0)),
+                    entry(&row.sequential, paper(1)),
+                    entry(&row.ttg, paper(2)),
+                    entry(&row.shielded, None),
+                ],
+            })
+        })
+        .collect();
+    Comparison {
+        key_csv: "scenario",
+        key_heading: "scenario",
+        methods: vec![
+            method("ttc", Some("TTC")),
+            method("dqn-sequential", Some("DQN-Sequential")),
+            method("dqn-ttg", Some("DQN-TTG")),
+            method("dqn-ttg+shield", Some("DQN-TTG + shield")),
+        ],
+        metrics: 4,
+        rows,
     }
 }
 
-fn table1_csv(r: &Results) -> String {
-    let mut out = String::from("scenario,method,metric,ours,paper\n");
-    for row in &r.table1 {
-        let Some(i) = SCENARIOS.iter().position(|s| *s == row.scenario) else {
-            continue;
-        };
-        let methods = [
-            ("ttc", row.ttc.as_ref()),
-            ("dqn-sequential", row.sequential.as_ref()),
-            ("dqn-ttg", row.ttg.as_ref()),
-        ];
-        for (m, (name, cell)) in methods.iter().enumerate() {
-            let theirs = paper1(&paper::TABLE1[i][m]).map(Some);
-            csv_cells(&mut out, &row.scenario, name, *cell, &theirs);
-        }
-        csv_cells(
-            &mut out,
-            &row.scenario,
-            "dqn-ttg+shield",
-            row.shielded.as_ref(),
-            &[None; 4],
-        );
+/// Table II: TTC with creep and the DQNs beside the paper's, then the
+/// shield and the oracle (the last three in the CSV only), per occluder
+/// length.
+fn table2(r: &Results) -> Comparison {
+    let rows = r
+        .table2
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let paper = |m: usize| {
+                let p = &paper::TABLE2[i][m];
+                Some(vec![p.success, p.collision, p.time])
+            };
+            let entry = |cell: &Option<Cell>, paper| Entry {
+                ours: metrics(cell.as_ref()),
+                paper,
+            };
+            ComparisonRow {
+                key: row.length_m.to_string(),
+                label: format!("{} m", row.length_m),
+                entries: vec![
+                    entry(&row.ttc_creep, paper(0)),
+                    entry(&row.ttg, paper(1)),
+                    entry(&row.creep, paper(2)),
+                    entry(&row.sequential, paper(3)),
+                    entry(&row.shielded, None),
+                    entry(&row.shield_alone, None),
+                    entry(&row.see_through, None),
+                    entry(&row.oracle, None),
+                ],
+            }
+        })
+        .collect();
+    Comparison {
+        key_csv: "occlusion_m",
+        key_heading: "occlusion",
+        methods: vec![
+            method("ttc-creep", Some("TTC with creep")),
+            method("dqn-ttg", Some("DQN-TTG")),
+            method("dqn-creep", Some("DQN-Creep")),
+            method("dqn-sequential", Some("DQN-Sequential")),
+            method("dqn-creep+shield", Some("DQN-Creep + shield")),
+            method("shield-alone", None),
+            method("shield-alone-see-through", None),
+            method("oracle", None),
+        ],
+        metrics: 3,
+        rows,
     }
-    out
-}
-
-fn table2_csv(r: &Results) -> String {
-    let mut out = String::from("occlusion_m,method,metric,ours,paper\n");
-    for (i, row) in r.table2.iter().enumerate() {
-        let methods = [
-            ("ttc-creep", row.ttc_creep.as_ref()),
-            ("dqn-ttg", row.ttg.as_ref()),
-            ("dqn-creep", row.creep.as_ref()),
-            ("dqn-sequential", row.sequential.as_ref()),
-        ];
-        for (m, (name, cell)) in methods.iter().enumerate() {
-            let theirs = paper2(&paper::TABLE2[i][m]).map(Some);
-            csv_cells(&mut out, &row.length_m, name, *cell, &theirs);
-        }
-        for (name, cell) in [
-            ("dqn-creep+shield", row.shielded.as_ref()),
-            ("shield-alone", row.shield_alone.as_ref()),
-            ("shield-alone-see-through", row.see_through.as_ref()),
-            ("oracle", row.oracle.as_ref()),
-        ] {
-            csv_cells(&mut out, &row.length_m, name, cell, &[None; 3]);
-        }
-    }
-    out
 }
 
 fn table3_csv(r: &Results) -> String {
@@ -236,7 +243,13 @@ fn training_csv(r: &Results) -> String {
     out
 }
 
-fn markdown(plan: &Plan, r: &Results) -> String {
+/// README.md, with Tables I and II when the plan has them.
+fn markdown(
+    plan: &Plan,
+    r: &Results,
+    table1: Option<&Comparison>,
+    table2: Option<&Comparison>,
+) -> String {
     let mut md = String::new();
     let w = &mut md;
     let _ = writeln!(w, "# The paper's tables, measured by crossroads\n");
@@ -277,11 +290,11 @@ fn markdown(plan: &Plan, r: &Results) -> String {
             ""
         }
     );
-    if plan.wants(Part::Table1) {
-        table1_md(w, r);
+    if let Some(t) = table1 {
+        table1_md(w, r, t);
     }
-    if plan.wants(Part::Table2) {
-        table2_md(w, r);
+    if let Some(t) = table2 {
+        table2_md(w, r, t);
     }
     if plan.wants(Part::Table3) {
         table3_md(w, r);
@@ -312,49 +325,9 @@ fn markdown(plan: &Plan, r: &Results) -> String {
     md
 }
 
-/// The Markdown lines of one table row: a line per metric the paper
-/// gives, `ours (paper)` per method, then ours alone for the methods the
-/// paper does not have (`extra`); `label` on the first line.
-fn md_rows<const N: usize>(
-    w: &mut String,
-    label: &str,
-    cells: &[[Option<f64>; 4]],
-    theirs: &[[f64; N]],
-    extra: &[[Option<f64>; 4]],
-) {
-    for (k, (metric, d)) in METRICS1.iter().take(N).enumerate() {
-        let name = if k == 0 { label } else { "" };
-        let _ = write!(w, "| {name} | {metric} |");
-        for (ours, paper) in cells.iter().zip(theirs) {
-            let _ = write!(w, " {} |", pair(ours[k], paper[k], *d));
-        }
-        for ours in extra {
-            let _ = write!(w, " {} |", num(ours[k], *d));
-        }
-        w.push('\n');
-    }
-}
-
-fn table1_md(w: &mut String, r: &Results) {
-    let _ = writeln!(
-        w,
-        "## Table I: no occlusion\n\n\
-         | scenario | metric | TTC | DQN-Sequential | DQN-TTG | DQN-TTG + shield |\n\
-         | --- | --- | --- | --- | --- | --- |"
-    );
-    for row in &r.table1 {
-        let Some(i) = SCENARIOS.iter().position(|s| *s == row.scenario) else {
-            continue;
-        };
-        let cells = [
-            metrics(row.ttc.as_ref()),
-            metrics(row.sequential.as_ref()),
-            metrics(row.ttg.as_ref()),
-        ];
-        let theirs = paper::TABLE1[i].map(|p| paper1(&p));
-        let extra = [metrics(row.shielded.as_ref())];
-        md_rows(w, &title(&row.scenario), &cells, &theirs, &extra);
-    }
+fn table1_md(w: &mut String, r: &Results, table: &Comparison) {
+    let _ = writeln!(w, "## Table I: no occlusion\n");
+    w.push_str(&table.to_markdown());
     let thresholds: Vec<String> = r
         .table1
         .iter()
@@ -375,24 +348,12 @@ fn table1_md(w: &mut String, r: &Results) {
     );
 }
 
-fn table2_md(w: &mut String, r: &Results) {
+fn table2_md(w: &mut String, r: &Results, table: &Comparison) {
     let _ = writeln!(
         w,
-        "## Table II: occlusion (left turn across two lanes, traffic does not brake)\n\n\
-         | occlusion | metric | TTC with creep | DQN-TTG | DQN-Creep | DQN-Sequential | DQN-Creep + shield |\n\
-         | --- | --- | --- | --- | --- | --- | --- |"
+        "## Table II: occlusion (left turn across two lanes, traffic does not brake)\n"
     );
-    for (i, row) in r.table2.iter().enumerate() {
-        let cells = [
-            metrics(row.ttc_creep.as_ref()),
-            metrics(row.ttg.as_ref()),
-            metrics(row.creep.as_ref()),
-            metrics(row.sequential.as_ref()),
-        ];
-        let theirs = paper::TABLE2[i].map(|p| paper2(&p));
-        let extra = [metrics(row.shielded.as_ref())];
-        md_rows(w, &format!("{} m", row.length_m), &cells, &theirs, &extra);
-    }
+    w.push_str(&table.to_markdown());
     let thresholds: Vec<String> = r
         .table2
         .iter()
