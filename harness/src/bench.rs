@@ -208,7 +208,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Re
             json,
         } => learner::run(
             config,
-            &learner::Options {
+            &learner::LearnerBenchOptions {
                 batches: batch.clone(),
                 threads: threads
                     .or(config.runtime.learner_torch_threads())
@@ -230,7 +230,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Re
             json,
         } => actor::run(
             config,
-            &actor::Options {
+            &actor::ActorBenchOptions {
                 envs: envs.clone(),
                 transports: transports.clone(),
                 rounds: *rounds,
@@ -250,7 +250,7 @@ pub fn run(global: &GlobalArgs, config: &Config, args: &BenchArgs) -> anyhow::Re
             json,
         } => load::run(
             config,
-            &load::Options {
+            &load::LoadBenchOptions {
                 streams: *streams,
                 shm: *shm,
                 seconds: *seconds,

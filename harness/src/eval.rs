@@ -140,7 +140,7 @@ struct JsonReport<'a> {
 
 /// A policy as `crossroads eval` and `render` run it.
 #[derive(Debug)]
-pub struct Loaded {
+pub struct LoadedPolicy {
     /// The scenario.
     pub scenario: Arc<Scenario>,
     /// The policy, behind the shield with `--shield`.
@@ -154,7 +154,7 @@ pub struct Loaded {
 
 /// The scenario and the policy that `args` name, checked to fit the action
 /// set; errors name the flag at fault.
-pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
+pub fn load(args: &PolicyArgs) -> anyhow::Result<LoadedPolicy> {
     let scenario = Arc::new(
         Scenario::load_with_drivers(&args.scenario, args.drivers.as_deref())
             .with_context(|| format!("scenario {:?}", args.scenario))?,
@@ -195,7 +195,7 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
     policy
         .supports(actions)
         .with_context(|| format!("--policy {} with --actions {}", args.policy, actions.name()))?;
-    Ok(Loaded {
+    Ok(LoadedPolicy {
         scenario,
         policy,
         shield,
@@ -205,7 +205,7 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<Loaded> {
 
 /// Runs the evaluation and prints the report.
 pub fn run(args: &EvalArgs) -> anyhow::Result<ExitCode> {
-    let Loaded {
+    let LoadedPolicy {
         scenario,
         policy,
         shield,

@@ -23,7 +23,7 @@ use tonic::{Request, Response, Status};
 
 use crate::LearnerError;
 use crate::checkpoint::{CheckpointStore, StoreError};
-use crate::training::{Command, Shared};
+use crate::training::{LearnerCommand, Shared};
 
 /// Bytes per `CheckpointChunk`.
 const CHUNK_BYTES: usize = 256 << 10;
@@ -52,7 +52,7 @@ impl LearnerService {
 
     async fn command<T>(
         &self,
-        make: impl FnOnce(oneshot::Sender<T>) -> Command,
+        make: impl FnOnce(oneshot::Sender<T>) -> LearnerCommand,
     ) -> Result<T, Status> {
         let (tx, rx) = oneshot::channel();
         self.shared
@@ -194,7 +194,10 @@ impl pb::learner_server::Learner for LearnerService {
         _request: Request<pb::SaveCheckpointRequest>,
     ) -> Result<Response<pb::CheckpointInfo>, Status> {
         self.store()?;
-        let entry = self.command(Command::Save).await?.map_err(to_status)?;
+        let entry = self
+            .command(LearnerCommand::Save)
+            .await?
+            .map_err(to_status)?;
         Ok(Response::new(checkpoint_to_wire(&CheckpointSummary::from(
             &entry,
         ))))
@@ -211,7 +214,7 @@ impl pb::learner_server::Learner for LearnerService {
             blocking(move || store.resolve(&id)).await?;
         }
         let (entry, version) = self
-            .command(|reply| Command::Restore(id, reply))
+            .command(|reply| LearnerCommand::Restore(id, reply))
             .await?
             .map_err(to_status)?;
         Ok(Response::new(pb::RestoreCheckpointResponse {
@@ -263,7 +266,7 @@ impl pb::learner_server::Learner for LearnerService {
             )));
         }
         let metrics: BTreeMap<String, f64> = r.metrics.into_iter().collect();
-        self.command(|reply| Command::ReportEvaluation {
+        self.command(|reply| LearnerCommand::ReportEvaluation {
             version: r.weights_version,
             metrics,
             reply,

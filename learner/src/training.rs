@@ -30,7 +30,7 @@ const CONNECT_EVERY: Duration = Duration::from_millis(200);
 
 /// Requests from the gRPC service, answered between updates.
 #[derive(Debug)]
-pub enum Command {
+pub enum LearnerCommand {
     /// Write a checkpoint now.
     Save(oneshot::Sender<Result<CheckpointEntry, LearnerError>>),
     /// Load a checkpoint and continue from it; answers with the checkpoint
@@ -78,7 +78,7 @@ pub struct Shared {
     /// Training progress.
     pub status: Mutex<StatusView>,
     /// Commands to the training thread.
-    pub commands: mpsc::Sender<Command>,
+    pub commands: mpsc::Sender<LearnerCommand>,
     /// The run's configuration.
     pub config: Config,
     /// Metrics.
@@ -95,7 +95,7 @@ pub struct LoopInputs {
     /// Prefetched batches.
     pub batches: mpsc::Receiver<Prefetched>,
     /// Commands from the service.
-    pub commands: mpsc::Receiver<Command>,
+    pub commands: mpsc::Receiver<LearnerCommand>,
     /// Priority updates to the replay.
     pub priorities: mpsc::Sender<NewPriorities>,
     /// Runtime for waiting on channels from this thread.
@@ -137,7 +137,7 @@ impl std::fmt::Debug for Learner {
 
 enum Event {
     Stop,
-    Command(Command),
+    Command(LearnerCommand),
     Batch(Option<Prefetched>),
     Tick,
 }
@@ -505,15 +505,15 @@ impl Learner {
         Ok((entry, self.version))
     }
 
-    fn handle(&mut self, command: Command) {
+    fn handle(&mut self, command: LearnerCommand) {
         match command {
-            Command::Save(reply) => {
+            LearnerCommand::Save(reply) => {
                 let _ = reply.send(self.save());
             }
-            Command::Restore(id, reply) => {
+            LearnerCommand::Restore(id, reply) => {
                 let _ = reply.send(self.restore(&id));
             }
-            Command::ReportEvaluation {
+            LearnerCommand::ReportEvaluation {
                 version,
                 metrics,
                 reply,

@@ -25,7 +25,7 @@ use super::{describe_network, load_average};
 
 /// What to measure.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub struct ActorBenchOptions {
     /// Environment counts M.
     pub envs: Vec<usize>,
     /// Transports: `inproc`, `shm`, `grpc`.
@@ -64,7 +64,7 @@ enum Sink {
 }
 
 /// Measures and prints.
-pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
+pub fn run(config: &Config, o: &ActorBenchOptions) -> anyhow::Result<ExitCode> {
     for t in &o.transports {
         anyhow::ensure!(
             matches!(t.as_str(), "inproc" | "shm" | "grpc"),
@@ -163,7 +163,12 @@ pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-async fn measure(config: &Config, o: &Options, transport: &str, m: usize) -> anyhow::Result<Cell> {
+async fn measure(
+    config: &Config,
+    o: &ActorBenchOptions,
+    transport: &str,
+    m: usize,
+) -> anyhow::Result<Cell> {
     let mut c = config.clone();
     c.replay.listen = ([127, 0, 0, 1], 0).into();
     c.replay.snapshot_dir = None;

@@ -19,7 +19,7 @@ use serde_json::json;
 
 /// What to measure.
 #[derive(Debug, Clone)]
-pub struct Options {
+pub struct LearnerBenchOptions {
     pub batches: Vec<u32>,
     pub threads: usize,
     pub rounds: usize,
@@ -58,7 +58,7 @@ fn script() -> Option<PathBuf> {
 }
 
 /// Runs the PyTorch twin; `Err` says why it could not.
-fn pytorch(config: &Config, o: &Options) -> Result<serde_json::Value, String> {
+fn pytorch(config: &Config, o: &LearnerBenchOptions) -> Result<serde_json::Value, String> {
     let spec = TrainerConfig::from_config(&config.sim, &config.learner)
         .map_err(|e| e.to_string())?
         .spec;
@@ -111,7 +111,10 @@ fn pytorch(config: &Config, o: &Options) -> Result<serde_json::Value, String> {
     serde_json::from_slice(&out.stdout).map_err(|e| format!("unreadable PyTorch report: {e}"))
 }
 
-async fn fed_runs(config: &Config, o: &Options) -> anyhow::Result<Vec<(u32, FedReport)>> {
+async fn fed_runs(
+    config: &Config,
+    o: &LearnerBenchOptions,
+) -> anyhow::Result<Vec<(u32, FedReport)>> {
     let mut c = config.clone();
     c.replay.listen = ([127, 0, 0, 1], 0).into();
     c.replay.shm_ingest = false;
@@ -144,7 +147,7 @@ async fn fed_runs(config: &Config, o: &Options) -> anyhow::Result<Vec<(u32, FedR
 }
 
 /// Measures and prints.
-pub fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
+pub fn run(config: &Config, o: &LearnerBenchOptions) -> anyhow::Result<ExitCode> {
     tch::set_num_threads(o.threads as i32);
     let load = super::load_average();
     let round = Duration::from_secs_f64(o.seconds.max(0.1));

@@ -25,7 +25,7 @@ use serde::Serialize;
 
 /// What to run.
 #[derive(Debug, Clone)]
-pub(super) struct Options {
+pub(super) struct LoadBenchOptions {
     pub streams: usize,
     pub shm: usize,
     pub seconds: f64,
@@ -88,7 +88,7 @@ struct Report {
 }
 
 /// Runs the measurements and prints them.
-pub(super) fn run(config: &Config, o: &Options) -> anyhow::Result<ExitCode> {
+pub(super) fn run(config: &Config, o: &LoadBenchOptions) -> anyhow::Result<ExitCode> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -241,7 +241,11 @@ fn batches(n: usize, size: usize) -> Vec<TransitionBatch> {
     (0..n).map(|_| episodes.batch(size)).collect()
 }
 
-async fn replay_load(config: &Config, o: &Options, wal: bool) -> anyhow::Result<ReplayLoad> {
+async fn replay_load(
+    config: &Config,
+    o: &LoadBenchOptions,
+    wal: bool,
+) -> anyhow::Result<ReplayLoad> {
     let dir = tempfile::tempdir().context("a temporary folder for the log")?;
     let mut c = plain(config);
     c.replay.listen = ([127, 0, 0, 1], 0).into();
@@ -392,7 +396,7 @@ fn shm_publisher(
     Ok((latencies, refused))
 }
 
-async fn weights_load(config: &Config, o: &Options) -> anyhow::Result<WeightsLoad> {
+async fn weights_load(config: &Config, o: &LoadBenchOptions) -> anyhow::Result<WeightsLoad> {
     let mut c = plain(config);
     c.replay.listen = ([127, 0, 0, 1], 0).into();
     c.replay.snapshot_dir = None;

@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use super::paper::SCENARIOS;
 use super::report::title;
-use super::{Cell, Plan, behind_shield, evaluate_network, evaluate_policy};
+use super::{Plan, ReportCell, behind_shield, evaluate_network, evaluate_policy};
 use crate::experiments;
 use crate::progress;
 use crate::train::write_atomic;
@@ -90,12 +90,12 @@ pub struct DriversRow {
     pub drivers: String,
     /// TTC's threshold, tuned for `human` drivers.
     pub ttc_threshold: Option<f64>,
-    pub ttc: Option<Cell>,
-    pub ttg: Option<Cell>,
+    pub ttc: Option<ReportCell>,
+    pub ttg: Option<ReportCell>,
     /// DQN-TTG behind the shield assuming the `human` bounds.
-    pub shielded: Option<Cell>,
+    pub shielded: Option<ReportCell>,
     /// TTC at 0 s behind the same shield.
-    pub shield_alone: Option<Cell>,
+    pub shield_alone: Option<ReportCell>,
 }
 
 /// Everything the section measured.
@@ -233,7 +233,7 @@ pub fn evaluate(
 }
 
 /// The policies of a row, with their column names.
-fn columns(row: &DriversRow) -> [(&'static str, Option<&Cell>); 4] {
+fn columns(row: &DriversRow) -> [(&'static str, Option<&ReportCell>); 4] {
     [
         ("TTC", row.ttc.as_ref()),
         ("DQN-TTG", row.ttg.as_ref()),
@@ -298,7 +298,7 @@ fn csv(r: &DriversResults) -> String {
 }
 
 /// `collision % · success % · time s` of a cell.
-fn cell_md(c: Option<&Cell>) -> String {
+fn cell_md(c: Option<&ReportCell>) -> String {
     c.map_or("–".to_owned(), |c| {
         format!(
             "{:.2} · {:.1} · {}",

@@ -263,7 +263,7 @@ impl Plan {
 
 /// One evaluated cell.
 #[derive(Debug, Clone, Serialize)]
-pub struct Cell {
+pub struct ReportCell {
     /// The policy (`ttc:1.5`, `dqn:best@v812`).
     pub policy: String,
     /// Trials run.
@@ -276,14 +276,16 @@ pub struct Cell {
     pub timeout: f64,
     /// Mean time to goal of successful trials, s.
     pub time: Option<f64>,
-    /// Mean brake-light time of traffic per trial by SUMO's rule, s.
-    pub brake: f64,
+    /// Mean brake-light time of traffic per trial by SUMO's rule, s
+    /// (`brake` in results.json).
+    #[serde(rename = "brake")]
+    pub brake_light_s: f64,
     /// What the safety shield did, for a policy behind it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shield: Option<ShieldStats>,
 }
 
-impl Cell {
+impl ReportCell {
     fn of_report(r: &EvalReport) -> Self {
         Self {
             policy: r.policy.clone(),
@@ -292,7 +294,7 @@ impl Cell {
             collision: 100.0 * r.collision_rate,
             timeout: 100.0 * r.timeout_rate,
             time: r.mean_time_s,
-            brake: r.mean_brake_light_s,
+            brake_light_s: r.mean_brake_light_s,
             shield: None,
         }
     }
@@ -305,7 +307,7 @@ impl Cell {
             collision: 100.0 * p.collision_rate,
             timeout: 100.0 * p.timeout_rate,
             time: p.mean_time_s,
-            brake: p.mean_brake_light_s,
+            brake_light_s: p.mean_brake_light_s,
             shield: None,
         }
     }
@@ -317,13 +319,13 @@ impl Cell {
 pub struct Table1Row {
     pub scenario: String,
     pub ttc_threshold: Option<f64>,
-    pub ttc: Option<Cell>,
-    pub sequential: Option<Cell>,
-    pub ttg: Option<Cell>,
-    pub shielded: Option<Cell>,
+    pub ttc: Option<ReportCell>,
+    pub sequential: Option<ReportCell>,
+    pub ttg: Option<ReportCell>,
+    pub shielded: Option<ReportCell>,
     /// The shield alone: TTC at 0 s behind it, going whenever the shield
     /// lets it (not in the paper).
-    pub shield_alone: Option<Cell>,
+    pub shield_alone: Option<ReportCell>,
 }
 
 /// Table II, one occluder length.
@@ -331,21 +333,21 @@ pub struct Table1Row {
 pub struct Table2Row {
     pub length_m: u32,
     pub ttc_threshold: Option<f64>,
-    pub ttc_creep: Option<Cell>,
-    pub ttg: Option<Cell>,
-    pub creep: Option<Cell>,
-    pub sequential: Option<Cell>,
+    pub ttc_creep: Option<ReportCell>,
+    pub ttg: Option<ReportCell>,
+    pub creep: Option<ReportCell>,
+    pub sequential: Option<ReportCell>,
     /// DQN-Creep behind the safety shield (not in the paper).
-    pub shielded: Option<Cell>,
+    pub shielded: Option<ReportCell>,
     /// The shield alone: TTC with creep at 0 s behind it (not in the
     /// paper).
-    pub shield_alone: Option<Cell>,
+    pub shield_alone: Option<ReportCell>,
     /// The shield alone with walls that hide nothing (`see_through=1`):
     /// what the walls cost a shielded policy.
-    pub see_through: Option<Cell>,
+    pub see_through: Option<ReportCell>,
     /// The oracle ([`ORACLE`]): sees hidden cars and goes when going
     /// reaches the goal in every one of its futures; the top of the ladder.
-    pub oracle: Option<Cell>,
+    pub oracle: Option<ReportCell>,
 }
 
 /// The oracle of Table II's ladder: 16 futures per decision.
@@ -372,7 +374,7 @@ pub struct Results {
     pub table1: Vec<Table1Row>,
     pub table2: Vec<Table2Row>,
     /// Row = tested on, column = trained on, in [`paper::SCENARIOS`] order.
-    pub table3: Vec<Vec<Option<Cell>>>,
+    pub table3: Vec<Vec<Option<ReportCell>>>,
     /// TTC sweeps by scenario (`left`, `occluded-60`, ...).
     pub sweeps: Vec<TuneReport>,
     pub runs: Vec<RunRecord>,
@@ -578,7 +580,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                     scenario: &str,
                     actions: ActionSet,
                     shield: bool|
-     -> anyhow::Result<Option<Cell>> {
+     -> anyhow::Result<Option<ReportCell>> {
         stop()?;
         let dirs: Vec<PathBuf> = (1..=plan.members(experiment))
             .map(|k| plan.run_dir(&experiments::member_run(experiment, k)))
@@ -601,7 +603,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                               policy: &str,
                               actions: ActionSet,
                               params: ShieldParams|
-     -> anyhow::Result<Option<Cell>> {
+     -> anyhow::Result<Option<ReportCell>> {
         stop()?;
         if !plan.dqn {
             return Ok(None);
@@ -615,7 +617,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
         shield_alone_under(scenario, policy, actions, ShieldParams::default())
     };
     // The top of Table II's ladder, on the same trials.
-    let oracle = |scenario: &str| -> anyhow::Result<Option<Cell>> {
+    let oracle = |scenario: &str| -> anyhow::Result<Option<ReportCell>> {
         stop()?;
         if !plan.dqn {
             return Ok(None);
@@ -631,7 +633,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
             r.table1.push(Table1Row {
                 scenario: s.to_owned(),
                 ttc_threshold: ttc.and_then(|w| w.best.as_ref()).map(|b| b.threshold),
-                ttc: ttc.and_then(|w| w.best.as_ref().map(|b| Cell::of_sweep(b, w.trials))),
+                ttc: ttc.and_then(|w| w.best.as_ref().map(|b| ReportCell::of_sweep(b, w.trials))),
                 sequential: if plan.sequential {
                     dqn(&format!("sequential-{s}"), s, ActionSet::Sequential)?
                 } else {
@@ -650,7 +652,8 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
             r.table2.push(Table2Row {
                 length_m: len,
                 ttc_threshold: ttc.and_then(|w| w.best.as_ref()).map(|b| b.threshold),
-                ttc_creep: ttc.and_then(|w| w.best.as_ref().map(|b| Cell::of_sweep(b, w.trials))),
+                ttc_creep: ttc
+                    .and_then(|w| w.best.as_ref().map(|b| ReportCell::of_sweep(b, w.trials))),
                 ttg: dqn("ttg-occluded", &s, ActionSet::Ttg)?,
                 creep: dqn("creep-occluded", &s, ActionSet::Creep)?,
                 sequential: if plan.sequential {
@@ -757,7 +760,7 @@ fn evaluate_network(
     sc: &Arc<Scenario>,
     actions: ActionSet,
     shield: Option<ShieldParams>,
-) -> anyhow::Result<Option<Cell>> {
+) -> anyhow::Result<Option<ReportCell>> {
     let best: Vec<PathBuf> = dirs.iter().map(|d| d.join("best")).collect();
     let network = NetworkPolicy::load_members(&best)?;
     let dir = &dirs[0];
@@ -801,7 +804,7 @@ fn evaluate_policy(
     actions: ActionSet,
     policy: &dyn Policy,
     counters: Option<Arc<ShieldCounters>>,
-) -> anyhow::Result<Cell> {
+) -> anyhow::Result<ReportCell> {
     let scenario = sc.name();
     let bar = progress::bar(plan.trials, "trials");
     bar.set_message(format!("{name} on {scenario}"));
@@ -812,9 +815,9 @@ fn evaluate_policy(
         &|n| bar.inc(n),
     )?;
     bar.finish_and_clear();
-    let cell = Cell {
+    let cell = ReportCell {
         shield: counters.map(|c| c.stats()),
-        ..Cell::of_report(&report)
+        ..ReportCell::of_report(&report)
     };
     eprintln!(
         "  {name} on {scenario}: {:.2} % success, {:.2} % collisions, {}",

@@ -10,7 +10,7 @@ use crossroads_draw::plot::{self, Panel, Series};
 
 use super::paper::{self, FIG3_SCENARIOS, SCENARIOS};
 use super::table::{Comparison, ComparisonRow, Entry, Method, num, pair};
-use super::{Cell, Part, Plan, Results};
+use super::{Part, Plan, ReportCell, Results};
 use crate::train::{curve_panel, write_atomic};
 
 /// Writes every file of the report; returns their paths.
@@ -87,12 +87,12 @@ pub(super) fn title(s: &str) -> String {
 
 /// Our metrics of a cell, in the tables' order: success %, collision %,
 /// time s, brake s.
-fn metrics(c: Option<&Cell>) -> [Option<f64>; 4] {
+fn metrics(c: Option<&ReportCell>) -> [Option<f64>; 4] {
     [
         c.map(|c| c.success),
         c.map(|c| c.collision),
         c.and_then(|c| c.time),
-        c.map(|c| c.brake),
+        c.map(|c| c.brake_light_s),
     ]
 }
 
@@ -112,7 +112,7 @@ fn table1(r: &Results) -> Comparison {
                 let p = &paper::TABLE1[i][m];
                 Some(vec![p.success, p.collision, p.time, p.brake])
             };
-            let entry = |cell: &Option<Cell>, paper| Entry {
+            let entry = |cell: &Option<ReportCell>, paper| Entry {
                 ours: metrics(cell.as_ref()),
                 paper,
             };
@@ -155,7 +155,7 @@ fn table2(r: &Results) -> Comparison {
                 let p = &paper::TABLE2[i][m];
                 Some(vec![p.success, p.collision, p.time])
             };
-            let entry = |cell: &Option<Cell>, paper| Entry {
+            let entry = |cell: &Option<ReportCell>, paper| Entry {
                 ours: metrics(cell.as_ref()),
                 paper,
             };
@@ -414,7 +414,7 @@ fn shortfalls_md(w: &mut String, r: &Results) {
         return;
     }
     let mut lines = Vec::new();
-    let mut check = |what: String, ours: Option<&Cell>, success: f64, collision: f64| {
+    let mut check = |what: String, ours: Option<&ReportCell>, success: f64, collision: f64| {
         let Some(c) = ours else {
             return;
         };
@@ -543,10 +543,17 @@ fn ladder_md(w: &mut String, r: &Results) {
 /// TTC and unshielded DQN cells to compare against.
 fn shield_rows<'a>(
     label: String,
-    [shielded, alone]: [Option<&'a Cell>; 2],
-    ttc: Option<&'a Cell>,
-    dqn: Option<&'a Cell>,
-) -> impl Iterator<Item = (String, &'a Cell, Option<&'a Cell>, Option<&'a Cell>)> {
+    [shielded, alone]: [Option<&'a ReportCell>; 2],
+    ttc: Option<&'a ReportCell>,
+    dqn: Option<&'a ReportCell>,
+) -> impl Iterator<
+    Item = (
+        String,
+        &'a ReportCell,
+        Option<&'a ReportCell>,
+        Option<&'a ReportCell>,
+    ),
+> {
     let alone_label = format!("{label}, shield alone");
     let shielded = shielded.map(|s| (label, s, ttc, dqn));
     let alone = alone.map(|s| (alone_label, s, ttc, dqn));
@@ -592,7 +599,7 @@ fn shield_md(w: &mut String, r: &Results) {
     );
     let mark = |ok: bool| if ok { "✓" } else { "✗" };
     for (label, s, ttc, dqn) in rows {
-        let ratio = |other: Option<&Cell>| -> Option<f64> { Some(s.time? / other?.time?) };
+        let ratio = |other: Option<&ReportCell>| -> Option<f64> { Some(s.time? / other?.time?) };
         let vs_ttc = ttc.map_or("–".to_owned(), |t| {
             format!(
                 "{} {:.2} % vs {:.2} %",

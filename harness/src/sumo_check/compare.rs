@@ -27,7 +27,7 @@ pub enum Verdict {
 
 /// One metric of one policy on one scenario, in both simulators.
 #[derive(Debug, Clone, Serialize)]
-pub struct Cell {
+pub struct SumoCell {
     /// Scenario.
     pub scenario: String,
     /// Policy.
@@ -53,7 +53,7 @@ pub struct Cell {
     pub gated: bool,
 }
 
-impl Cell {
+impl SumoCell {
     /// One line for a terminal.
     pub fn describe(&self) -> String {
         let pct = matches!(self.metric, "success" | "collision" | "timeout");
@@ -85,7 +85,7 @@ impl Cell {
 pub const EMPTY_TOLERANCE_S: f64 = 0.3;
 
 /// Every cell of every pair; TTC cells gated where their plan is.
-pub fn cells(pairs: &BTreeMap<String, Vec<Pair>>, plans: &[Plan]) -> Vec<Cell> {
+pub fn cells(pairs: &BTreeMap<String, Vec<Pair>>, plans: &[Plan]) -> Vec<SumoCell> {
     let mut out = Vec::new();
     for (scenario, list) in pairs {
         let plan_gated = plans
@@ -100,7 +100,7 @@ pub fn cells(pairs: &BTreeMap<String, Vec<Pair>>, plans: &[Plan]) -> Vec<Cell> {
                     Some(d) if d.abs() <= EMPTY_TOLERANCE_S => Verdict::Agrees,
                     _ => Verdict::Drifts,
                 };
-                out.push(Cell {
+                out.push(SumoCell {
                     scenario: scenario.clone(),
                     policy: pair.policy.to_string(),
                     metric: "time_s",
@@ -188,7 +188,7 @@ fn cell(
     ours: Option<f64>,
     sumo: Option<f64>,
     gated: bool,
-) -> Cell {
+) -> SumoCell {
     let holds = |[lo, hi]: [f64; 2]| lo <= 1e-12 && hi >= -1e-12;
     let verdict = match diff {
         None => Verdict::Agrees,
@@ -196,7 +196,7 @@ fn cell(
         Some(d) if holds(d.ci99) => Verdict::Differs,
         Some(_) => Verdict::Drifts,
     };
-    Cell {
+    SumoCell {
         scenario: scenario.to_owned(),
         policy: pair.policy.to_string(),
         metric,

@@ -28,7 +28,7 @@ use serde::Deserialize;
 
 use crate::progress;
 
-pub use compare::{Cell, Verdict};
+pub use compare::{SumoCell, Verdict};
 
 /// `crossroads sumo-check`.
 #[derive(Debug, Args)]
@@ -248,7 +248,7 @@ pub fn run(args: &SumoCheckArgs) -> anyhow::Result<ExitCode> {
         seed: args.seed,
     };
     let written = report::write(&args.out, &meta, &plans, &pairs, &cells)?;
-    let drifts: Vec<&Cell> = cells
+    let drifts: Vec<&SumoCell> = cells
         .iter()
         .filter(|c| c.gated && c.verdict == Verdict::Drifts)
         .collect();

@@ -13,7 +13,7 @@ use crossroads_draw::plot::{self, Panel, Series};
 use crossroads_sim::{EvalReport, PolicySpec};
 use serde_json::json;
 
-use super::{Cell, Pair, Plan, Verdict};
+use super::{Pair, Plan, SumoCell, Verdict};
 
 /// How the check was made.
 #[derive(Debug, Clone)]
@@ -36,7 +36,7 @@ pub fn write(
     meta: &Meta,
     plans: &[Plan],
     pairs: &BTreeMap<String, Vec<Pair>>,
-    cells: &[Cell],
+    cells: &[SumoCell],
 ) -> anyhow::Result<PathBuf> {
     let put = |name: &str, text: String| -> anyhow::Result<()> {
         let path = out.join(name);
@@ -98,7 +98,7 @@ fn secs(v: Option<f64>) -> String {
     v.map_or("-".to_owned(), |v| format!("{v:.2}"))
 }
 
-fn mark(cells: &[Cell], scenario: &str, policy: &str, metric: &str) -> &'static str {
+fn mark(cells: &[SumoCell], scenario: &str, policy: &str, metric: &str) -> &'static str {
     match cells
         .iter()
         .find(|c| c.scenario == scenario && c.policy == policy && c.metric == metric)
@@ -114,7 +114,7 @@ fn readme(
     meta: &Meta,
     plans: &[Plan],
     pairs: &BTreeMap<String, Vec<Pair>>,
-    cells: &[Cell],
+    cells: &[SumoCell],
 ) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Our simulator against SUMO\n");
@@ -232,11 +232,11 @@ fn readme(
             );
         }
     }
-    let drifts: Vec<&Cell> = cells
+    let drifts: Vec<&SumoCell> = cells
         .iter()
         .filter(|c| c.gated && c.verdict == Verdict::Drifts)
         .collect();
-    let approximated: Vec<&Cell> = cells
+    let approximated: Vec<&SumoCell> = cells
         .iter()
         .filter(|c| {
             !c.gated
@@ -271,7 +271,7 @@ fn readme(
     s
 }
 
-fn csv(cells: &[Cell]) -> String {
+fn csv(cells: &[SumoCell]) -> String {
     let mut s = String::from(
         "scenario,policy,metric,ours,sumo,diff,diff_low95,diff_high95,diff_low99,diff_high99,verdict,gated\n",
     );

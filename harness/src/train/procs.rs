@@ -23,7 +23,7 @@ pub fn free_port() -> anyhow::Result<SocketAddr> {
 
 /// One role process.
 #[derive(Debug)]
-pub struct RoleProcess {
+pub struct RoleChild {
     /// `replay`, `learner`, `actor-3`.
     pub name: String,
     /// Its `/metrics` address.
@@ -34,7 +34,7 @@ pub struct RoleProcess {
     exited: Option<ExitStatus>,
 }
 
-impl RoleProcess {
+impl RoleChild {
     /// Starts `exe --config config <args>` with `env` added, standard
     /// output and error appended to `log`.
     pub fn spawn(
@@ -112,7 +112,7 @@ impl RoleProcess {
     }
 }
 
-impl Drop for RoleProcess {
+impl Drop for RoleChild {
     fn drop(&mut self) {
         if self.exited().is_none() {
             let _ = self.child.kill();
@@ -194,7 +194,7 @@ impl Addresses {
 /// finish its budget before the first probe (the session then sees it
 /// ended and evaluates its last checkpoint).
 pub async fn wait_ready<F, Fut>(
-    role: &mut RoleProcess,
+    role: &mut RoleChild,
     shutdown: &Shutdown,
     done_counts: bool,
     probe: F,
@@ -231,7 +231,7 @@ where
 }
 
 /// The error of a role that exited on its own, with the end of its log.
-pub fn died(role: &RoleProcess, status: ExitStatus) -> anyhow::Error {
+pub fn died(role: &RoleChild, status: ExitStatus) -> anyhow::Error {
     anyhow::anyhow!(
         "{} exited ({status}); the end of {}:\n{}",
         role.name,

@@ -12,7 +12,7 @@ use crossroads_transport::{ClientSecurity, LearnerClient};
 use indicatif::ProgressBar;
 
 use super::prepare::Run;
-use super::procs::{Addresses, RoleProcess, died, free_port, wait_ready};
+use super::procs::{Addresses, RoleChild, died, free_port, wait_ready};
 use super::record::{Curve, RunStatus, Summary, TrainMetrics, plot_curve};
 use crate::role;
 
@@ -41,9 +41,9 @@ impl End {
 /// The running session: roles, clients, records.
 pub struct Session {
     pub run: Run,
-    pub replay: RoleProcess,
-    pub learner: RoleProcess,
-    pub actors: Vec<RoleProcess>,
+    pub replay: RoleChild,
+    pub learner: RoleChild,
+    pub actors: Vec<RoleChild>,
     pub replay_client: ReplayClient,
     pub learner_client: LearnerClient,
     pub curve: Curve,
@@ -84,7 +84,7 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
     let c = run.config.clone();
     let timeout = Duration::from_millis(c.transport.request_timeout_ms.min(10_000));
 
-    let mut replay = RoleProcess::spawn(
+    let mut replay = RoleChild::spawn(
         "replay",
         &exe,
         &config_path,
@@ -106,7 +106,7 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
     })
     .await?;
 
-    let mut learner = RoleProcess::spawn(
+    let mut learner = RoleChild::spawn(
         "learner",
         &exe,
         &config_path,
@@ -133,7 +133,7 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
     for i in 0..c.actor.count {
         let mut env = env.clone();
         env.push(("CROSSROADS_ACTOR__INDEX".into(), i.to_string()));
-        actors.push(RoleProcess::spawn(
+        actors.push(RoleChild::spawn(
             &format!("actor-{i}"),
             &exe,
             &config_path,
