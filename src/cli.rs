@@ -8,7 +8,8 @@ use clap::{Args, Parser, Subcommand};
 use crossroads_config::ConfigLoader;
 use crossroads_harness::bench::BenchArgs;
 use crossroads_harness::eval::{EvalArgs, PolicyArgs};
-use crossroads_harness::global::{GlobalArgs, KeyFlag, given, layer, with_keys};
+use crossroads_harness::global::{GlobalArgs, KeyFlag, layer, with_keys};
+use crossroads_harness::key_flag;
 use crossroads_harness::reproduce::ReproduceArgs;
 use crossroads_harness::sumo_check::SumoCheckArgs;
 use crossroads_harness::train::TrainArgs;
@@ -198,28 +199,16 @@ pub struct ActorArgs {
 impl ActorArgs {
     /// The flags that set a configuration key.
     pub const KEYS: &'static [KeyFlag<Self>] = &[
-        KeyFlag::value("scenario", "sim.scenario", |a, k, l| {
-            given(l, k, &a.scenario)
-        }),
-        KeyFlag::value("actions", "sim.action_set", |a, k, l| {
-            given(l, k, &a.actions)
-        }),
-        KeyFlag::value("envs", "actor.envs", |a, k, l| given(l, k, &a.envs)),
-        KeyFlag::value("index", "actor.index", |a, k, l| given(l, k, &a.index)),
-        KeyFlag::value("count", "actor.count", |a, k, l| given(l, k, &a.count)),
-        KeyFlag::value("transport", "actor.transport", |a, k, l| {
-            given(l, k, &a.transport)
-        }),
-        KeyFlag::value("weights", "actor.weights", |a, k, l| {
-            given(l, k, &a.weights)
-        }),
-        KeyFlag::value("replay", "transport.replay_endpoint", |a, k, l| {
-            given(l, k, &a.replay)
-        }),
-        KeyFlag::value("learner", "transport.learner_endpoint", |a, k, l| {
-            given(l, k, &a.learner)
-        }),
-        KeyFlag::on("eval", "actor.eval", |a| a.eval),
+        key_flag!(scenario => "sim.scenario"),
+        key_flag!(actions => "sim.action_set"),
+        key_flag!(envs => "actor.envs"),
+        key_flag!(index => "actor.index"),
+        key_flag!(count => "actor.count"),
+        key_flag!(transport => "actor.transport"),
+        key_flag!(weights => "actor.weights"),
+        key_flag!(replay => "transport.replay_endpoint"),
+        key_flag!(learner => "transport.learner_endpoint"),
+        key_flag!(on eval => "actor.eval"),
     ];
 
     /// Layers these flags over `loader`.
@@ -255,20 +244,12 @@ pub struct LearnerArgs {
 impl LearnerArgs {
     /// The flags that set a configuration key.
     pub const KEYS: &'static [KeyFlag<Self>] = &[
-        KeyFlag::value("listen", "learner.listen", |a, k, l| {
-            given(l, k, &a.listen.map(|v| v.to_string()))
-        }),
-        KeyFlag::value("replay", "transport.replay_endpoint", |a, k, l| {
-            given(l, k, &a.replay)
-        }),
-        KeyFlag::value("checkpoint_dir", "learner.checkpoint_dir", |a, k, l| {
-            given(l, k, &a.checkpoint_dir)
-        }),
-        KeyFlag::value("max_updates", "learner.max_updates", |a, k, l| {
-            given(l, k, &a.max_updates)
-        }),
-        KeyFlag::off("no_resume", "learner.resume", |a| a.no_resume),
-        KeyFlag::off("no_shm", "learner.shm_publish", |a| a.no_shm),
+        key_flag!(listen => "learner.listen"),
+        key_flag!(replay => "transport.replay_endpoint"),
+        key_flag!(checkpoint_dir => "learner.checkpoint_dir"),
+        key_flag!(max_updates => "learner.max_updates"),
+        key_flag!(off no_resume => "learner.resume"),
+        key_flag!(off no_shm => "learner.shm_publish"),
     ];
 
     /// Layers these flags over `loader`.
@@ -434,18 +415,12 @@ pub struct ReplayArgs {
 impl ReplayArgs {
     /// The flags that set a configuration key.
     pub const KEYS: &'static [KeyFlag<Self>] = &[
-        KeyFlag::value("listen", "replay.listen", |a, k, l| {
-            given(l, k, &a.listen.map(|v| v.to_string()))
-        }),
-        KeyFlag::value("snapshot_dir", "replay.snapshot_dir", |a, k, l| {
-            given(l, k, &a.snapshot_dir)
-        }),
-        KeyFlag::value("capacity", "replay.capacity", |a, k, l| {
-            given(l, k, &a.capacity)
-        }),
-        KeyFlag::value("table", "replay.table", |a, k, l| given(l, k, &a.table)),
-        KeyFlag::off("no_shm", "replay.shm_ingest", |a| a.no_shm),
-        KeyFlag::off("no_restore", "replay.restore", |a| a.no_restore),
+        key_flag!(listen => "replay.listen"),
+        key_flag!(snapshot_dir => "replay.snapshot_dir"),
+        key_flag!(capacity => "replay.capacity"),
+        key_flag!(table => "replay.table"),
+        key_flag!(off no_shm => "replay.shm_ingest"),
+        key_flag!(off no_restore => "replay.restore"),
     ];
 
     /// Layers these flags over `loader`.

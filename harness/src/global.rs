@@ -155,6 +155,25 @@ impl<A> KeyFlag<A> {
     }
 }
 
+/// A [`KeyFlag`] for the field of the same name of a command's `Args`:
+/// `key_flag!(envs => "actor.envs")` layers the field's value when given;
+/// `key_flag!(on eval => "actor.eval")` and `key_flag!(off no_shm =>
+/// "replay.shm_ingest")` are switches that set the key to true or false.
+#[macro_export]
+macro_rules! key_flag {
+    (on $field:ident => $key:literal) => {
+        $crate::global::KeyFlag::on(stringify!($field), $key, |a| a.$field)
+    };
+    (off $field:ident => $key:literal) => {
+        $crate::global::KeyFlag::off(stringify!($field), $key, |a| a.$field)
+    };
+    ($field:ident => $key:literal) => {
+        $crate::global::KeyFlag::value(stringify!($field), $key, |a, k, l| {
+            $crate::global::given(l, k, &a.$field)
+        })
+    };
+}
+
 /// `value` at `key` over `loader`, when given.
 pub fn given(
     loader: ConfigLoader,

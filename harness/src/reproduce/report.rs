@@ -85,15 +85,19 @@ pub(super) fn title(s: &str) -> String {
     })
 }
 
-/// Our metrics of a cell, in the tables' order: success %, collision %,
-/// time s, brake s.
-fn metrics(c: Option<&ReportCell>) -> [Option<f64>; 4] {
-    [
-        c.map(|c| c.success),
-        c.map(|c| c.collision),
-        c.and_then(|c| c.time),
-        c.map(|c| c.brake_light_s),
-    ]
+/// A method's entry: our metrics of `cell` in the tables' order (success
+/// %, collision %, time s, brake s) and the paper's, if it has the method.
+fn entry(cell: &Option<ReportCell>, paper: Option<Vec<f64>>) -> Entry {
+    let c = cell.as_ref();
+    Entry {
+        ours: [
+            c.map(|c| c.success),
+            c.map(|c| c.collision),
+            c.and_then(|c| c.time),
+            c.map(|c| c.brake_light_s),
+        ],
+        paper,
+    }
 }
 
 const fn method(csv: &'static str, heading: Option<&'static str>) -> Method {
@@ -111,10 +115,6 @@ fn table1(r: &Results) -> Comparison {
             let paper = |m: usize| {
                 let p = &paper::TABLE1[i][m];
                 Some(vec![p.success, p.collision, p.time, p.brake])
-            };
-            let entry = |cell: &Option<ReportCell>, paper| Entry {
-                ours: metrics(cell.as_ref()),
-                paper,
             };
             Some(ComparisonRow {
                 key: row.scenario.clone(),
@@ -154,10 +154,6 @@ fn table2(r: &Results) -> Comparison {
             let paper = |m: usize| {
                 let p = &paper::TABLE2[i][m];
                 Some(vec![p.success, p.collision, p.time])
-            };
-            let entry = |cell: &Option<ReportCell>, paper| Entry {
-                ours: metrics(cell.as_ref()),
-                paper,
             };
             ComparisonRow {
                 key: row.length_m.to_string(),

@@ -42,7 +42,8 @@ use crossroads_config::{Config, ConfigLoader};
 pub use self::record::write_atomic;
 pub use self::record::{Evaluation, RunStatus, Summary, curve_panel, read_curve};
 pub use self::session::{machine, sum_metric};
-use crate::global::{GlobalArgs, KeyFlag, given, layer};
+use crate::global::{GlobalArgs, KeyFlag, layer};
+use crate::key_flag;
 use crate::role;
 
 /// `crossroads train`. Each flag overrides the configuration key it names.
@@ -89,20 +90,12 @@ pub fn default_out(scenario: &str, actions: &str) -> PathBuf {
 impl TrainArgs {
     /// The flags that set a configuration key.
     pub const KEYS: &'static [KeyFlag<Self>] = &[
-        KeyFlag::value("scenario", "sim.scenario", |a, k, l| {
-            given(l, k, &a.scenario)
-        }),
-        KeyFlag::value("actions", "sim.action_set", |a, k, l| {
-            given(l, k, &a.actions)
-        }),
-        KeyFlag::value("actors", "actor.count", |a, k, l| given(l, k, &a.actors)),
-        KeyFlag::value("envs", "actor.envs", |a, k, l| given(l, k, &a.envs)),
-        KeyFlag::value("updates", "learner.max_updates", |a, k, l| {
-            given(l, k, &a.updates)
-        }),
-        KeyFlag::value("minutes", "train.max_minutes", |a, k, l| {
-            given(l, k, &a.minutes)
-        }),
+        key_flag!(scenario => "sim.scenario"),
+        key_flag!(actions => "sim.action_set"),
+        key_flag!(actors => "actor.count"),
+        key_flag!(envs => "actor.envs"),
+        key_flag!(updates => "learner.max_updates"),
+        key_flag!(minutes => "train.max_minutes"),
     ];
 
     /// The run folder these flags name, before the config is read.
