@@ -1,11 +1,11 @@
-//! What `crossroads replay`, `learner` and `actor` share: the async
-//! runtime, signal handling, the process's metrics registry and its
+//! What `crossroads replay`, `learner`, `actor` and `train` share: the
+//! async runtime, signal handling, the process's metrics registry and its
 //! `/metrics` endpoint.
 //!
-//! Each role's own flags are layered over its section with
-//! `ConfigLoader::flag` (`cli.rs`) before the configuration loads; the
-//! role's module then starts its crate's server or actor and waits for a
-//! signal.
+//! Each role's own flags are layered over its section before the
+//! configuration loads (a key table per command, `crate::global::KeyFlag`);
+//! the role's module in the binary then starts its crate's server or actor
+//! and waits for a signal.
 
 use std::process::ExitCode;
 

@@ -1,7 +1,7 @@
 //! What a picture of an episode's state shows, as plain data: a [`Scene`]
 //! of coloured polygons and lines in pixel coordinates plus a caption.
-//! Drawing it (PNG, animated GIF, SVG) is the caller's business; the
-//! `crossroads render` command draws scenes with plotters. Keeping the sim
+//! Drawing it (PNG, animated GIF, SVG) is the caller's business;
+//! `crossroads_draw` draws scenes with plotters. Keeping the sim
 //! free of drawing libraries keeps it small and lets tests check a scene's
 //! content directly.
 
