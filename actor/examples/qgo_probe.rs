@@ -1,21 +1,21 @@
-//! Q(go) diagnosed before it is tuned: given the answer, can the network
-//! tell a safe moment to go from a doomed one? Creep networks undervalue
-//! *go* where going is safe (`eval --risk 16 --missed`: medians of -2.5 to
-//! -4 for an outcome worth about +1): too thin a learning signal (*data*),
-//! or an observation without what separates the two (*features*)?
-//!
-//! It drives `--episodes` greedy episodes of `--scenario` with `--policy`'s
-//! network and labels every `--every`-th decision before a *go* with the
-//! mean discounted return of going in `--futures` forks (the present,
-//! hidden cars included, then other random traffic): *safe* when every fork
-//! reached the goal, *doomed* when more than half collided. A fresh network
-//! of the same shape regresses Q(go) on four fifths of the episodes (Adam,
-//! `--updates` batches of `--batch`); on the rest it and the RL network are
-//! compared with the labels (medians at safe states in view and at doomed
-//! ones, AUC of safe over doomed). The verdict, fixed before the first run:
-//! *features* when the regression's AUC is below 0.9 or its median at safe
-//! states in view is more than 1 below their median label; *data* when it
-//! reaches both while the RL network does not. Result and commands:
+//! Q(go) diagnosed before it is tuned: can the network tell a safe moment
+//! to go from a doomed one? Creep networks undervalue *go* where going is
+//! safe (`eval --risk 16 --missed`: medians of -2.5 to -4 for about +1):
+//! too thin a learning signal (*data*), or too poor an observation
+//! (*features*)? It drives `--episodes` greedy episodes of `--scenario`
+//! with `--policy`'s network and labels every `--every`-th decision before
+//! a *go* with the mean discounted return of going in `--futures` forks
+//! (the present, hidden cars included, then other random traffic): *safe*
+//! when every fork reached the goal, *doomed* when more than half collided.
+//! A fresh network of the same shape regresses Q(go) on four fifths of the
+//! episodes (Adam, `--updates` batches of `--batch`, labels averaging the
+//! first `--train-futures` forks; comma lists run one regression per pair,
+//! the first giving the verdict); on the rest the regressions and the RL
+//! network are compared with the labels (medians at safe states in view and
+//! at doomed ones, AUC of safe over doomed). The verdict, fixed before the
+//! first run: *features* when the regression's AUC is below 0.9 or its
+//! median at safe states in view is more than 1 below their median label;
+//! *data* when it reaches both while the RL network does not. Results:
 //! reports/occlusion-ladder/README.md, "Q(go) diagnosed: data, not features".
 
 use std::path::PathBuf;
@@ -33,8 +33,12 @@ struct Args {
     scenario: String,
     episodes: u64,
     futures: u32,
+    /// Forks averaged into each training label, one regression per entry
+    /// (the held-out comparison always uses all `futures`).
+    train_futures: Vec<u32>,
     seed: u64,
-    updates: usize,
+    /// Adam updates, one regression per entry.
+    updates: Vec<usize>,
     batch: usize,
     lr: f64,
     every: u32,
@@ -46,8 +50,9 @@ fn parse_args() -> Args {
         scenario: "occluded".to_owned(),
         episodes: 2000,
         futures: 16,
+        train_futures: Vec::new(),
         seed: 1,
-        updates: 20_000,
+        updates: vec![20_000],
         batch: 256,
         lr: 1e-3,
         every: 2,
@@ -62,17 +67,29 @@ fn parse_args() -> Args {
             "--episodes" => a.episodes = value.parse().unwrap_or_else(|_| bad("a count")),
             "--futures" => a.futures = value.parse().unwrap_or_else(|_| bad("a count")),
             "--seed" => a.seed = value.parse().unwrap_or_else(|_| bad("a number")),
-            "--updates" => a.updates = value.parse().unwrap_or_else(|_| bad("a count")),
+            "--train-futures" => a.train_futures = list(&value).unwrap_or_else(|| bad("counts")),
+            "--updates" => a.updates = list(&value).unwrap_or_else(|| bad("counts")),
             "--batch" => a.batch = value.parse().unwrap_or_else(|_| bad("a count")),
             "--lr" => a.lr = value.parse().unwrap_or_else(|_| bad("a number")),
             "--every" => a.every = value.parse().unwrap_or_else(|_| bad("a count")),
             _ => panic!(
-                "unknown flag {flag}; known: --policy --scenario --episodes --futures --seed \
-                 --updates --batch --lr --every"
+                "unknown flag {flag}; known: --policy --scenario --episodes --futures \
+                 --train-futures --seed --updates --batch --lr --every"
             ),
         }
     }
+    if a.train_futures.is_empty() {
+        a.train_futures = vec![a.futures];
+    }
+    if let Some(&n) = a.train_futures.iter().find(|&&n| n == 0 || n > a.futures) {
+        panic!("--train-futures {n}: between 1 and --futures ({})", a.futures);
+    }
     a
+}
+
+/// A comma-separated list of counts (`1,16`), `None` if any is not one.
+fn list<T: std::str::FromStr>(value: &str) -> Option<Vec<T>> {
+    value.split(',').map(|v| v.trim().parse().ok()).collect()
 }
 
 /// One labelled decision.
@@ -81,6 +98,8 @@ struct Sample {
     obs: Vec<f32>,
     /// Mean discounted return of going now, over the forks.
     label: f32,
+    /// Each fork's discounted return, in fork order.
+    returns: Vec<f32>,
     safe: bool,
     doomed: bool,
     in_view: bool,
@@ -90,7 +109,7 @@ struct Sample {
 
 /// Goes in `futures` forks of `env`: the mean return, whether every fork
 /// reached the goal, whether more than half collided.
-fn label(env: &Env, go: usize, futures: u32, base: u64) -> (f32, bool, bool) {
+fn label(env: &Env, go: usize, futures: u32, base: u64) -> (f32, Vec<f32>, bool, bool) {
     let runs: Vec<(f64, Option<Outcome>)> = (0..futures)
         .into_par_iter()
         .map(|j| {
@@ -111,6 +130,7 @@ fn label(env: &Env, go: usize, futures: u32, base: u64) -> (f32, bool, bool) {
         .count();
     (
         mean as f32,
+        runs.iter().map(|r| r.0 as f32).collect(),
         successes == futures as usize,
         2 * collisions > futures as usize,
     )
@@ -134,11 +154,12 @@ fn collect(a: &Args, net: &QNetwork, scenario: &Arc<Scenario>, go: usize) -> Vec
             let q = q.row(0);
             if decision.is_multiple_of(a.every.max(1)) {
                 let base = !episode_seed(a.seed ^ 0x9E0, e * 10_000 + u64::from(env.steps()));
-                let (label, safe, doomed) = label(&env, go, a.futures, base);
+                let (label, returns, safe, doomed) = label(&env, go, a.futures, base);
                 out.push(Sample {
                     episode: e,
                     obs: obs.clone(),
                     label,
+                    returns,
                     safe,
                     doomed,
                     in_view: env.sees_conflicts(view),
@@ -160,7 +181,16 @@ fn collect(a: &Args, net: &QNetwork, scenario: &Arc<Scenario>, go: usize) -> Vec
     out
 }
 
-fn train(a: &Args, net: &QNetwork, train: &[&Sample], go: usize) -> QNetwork {
+/// A fresh network of `net`'s shape regressing Q(go) on the mean of each
+/// sample's first `forks` returns, `updates` Adam steps.
+fn train(
+    a: &Args,
+    net: &QNetwork,
+    train: &[&Sample],
+    go: usize,
+    forks: u32,
+    updates: usize,
+) -> QNetwork {
     let fresh = QNetwork::new(net.spec().clone(), a.seed).expect("network");
     let mut opt = tch::nn::Adam::default()
         .build(fresh.var_store(), a.lr)
@@ -175,11 +205,15 @@ fn train(a: &Args, net: &QNetwork, train: &[&Sample], go: usize) -> QNetwork {
     };
     let mut flat = vec![0.0f32; a.batch * len];
     let mut targets = vec![0.0f32; a.batch];
-    for u in 0..a.updates {
+    let labels: Vec<f32> = train
+        .iter()
+        .map(|s| s.returns[..forks as usize].iter().sum::<f32>() / forks as f32)
+        .collect();
+    for u in 0..updates {
         for k in 0..a.batch {
-            let s = train[(next() % train.len() as u64) as usize];
-            flat[k * len..(k + 1) * len].copy_from_slice(&s.obs);
-            targets[k] = s.label;
+            let i = (next() % train.len() as u64) as usize;
+            flat[k * len..(k + 1) * len].copy_from_slice(&train[i].obs);
+            targets[k] = labels[i];
         }
         let x = Tensor::from_slice(&flat).view([a.batch as i64, len as i64]);
         let y = Tensor::from_slice(&targets);
@@ -244,17 +278,28 @@ fn main() {
         fit.len(),
         held.len()
     );
-    let regression = train(&a, &net, &fit, go);
     let len = held[0].obs.len();
     let flat: Vec<f32> = held.iter().flat_map(|s| s.obs.iter().copied()).collect();
-    let predicted: Vec<f32> = tch::no_grad(|| {
-        let x = Tensor::from_slice(&flat).view([held.len() as i64, len as i64]);
-        let q = regression
-            .q_values(&x)
-            .expect("forward")
-            .select(1, go as i64);
-        Vec::<f32>::try_from(&q).expect("values")
-    });
+    // One regression per (forks a label, updates) pair, in the order given.
+    let mut regressions: Vec<(String, Vec<f32>)> = Vec::new();
+    for &forks in &a.train_futures {
+        for &updates in &a.updates {
+            eprintln!("  regression on {forks}-fork labels, {updates} updates");
+            let regression = train(&a, &net, &fit, go, forks, updates);
+            let predicted: Vec<f32> = tch::no_grad(|| {
+                let x = Tensor::from_slice(&flat).view([held.len() as i64, len as i64]);
+                let q = regression
+                    .q_values(&x)
+                    .expect("forward")
+                    .select(1, go as i64);
+                Vec::<f32>::try_from(&q).expect("values")
+            });
+            regressions.push((
+                format!("regression ({forks}-fork labels, {updates} updates)"),
+                predicted,
+            ));
+        }
+    }
     let pick = |f: &dyn Fn(&Sample) -> bool, v: &dyn Fn(usize) -> f32| -> Vec<f32> {
         (0..held.len()).filter(|&i| f(held[i])).map(v).collect()
     };
@@ -262,7 +307,6 @@ fn main() {
     let safe = |s: &Sample| s.safe;
     let doomed = |s: &Sample| s.doomed;
     let label_of = |i: usize| held[i].label;
-    let reg = |i: usize| predicted[i];
     let rl = |i: usize| held[i].q_go;
     let mse = |v: &dyn Fn(usize) -> f32| -> f64 {
         (0..held.len())
@@ -287,11 +331,15 @@ fn main() {
         "| Q(go) | median at safe in view | at safe | at doomed | AUC safe > doomed | MSE vs label |"
     );
     println!("| --- | ---: | ---: | ---: | ---: | ---: |");
-    for (name, v) in [
-        ("label (16 futures)", &label_of as &dyn Fn(usize) -> f32),
-        ("regression", &reg),
-        ("RL network", &rl),
-    ] {
+    let label_name = format!("label ({} futures)", a.futures);
+    let mut rows: Vec<(&str, Box<dyn Fn(usize) -> f32 + '_>)> =
+        vec![(label_name.as_str(), Box::new(label_of))];
+    for (name, predicted) in &regressions {
+        rows.push((name.as_str(), Box::new(move |i: usize| predicted[i])));
+    }
+    rows.push(("RL network", Box::new(rl)));
+    for (name, v) in &rows {
+        let v: &dyn Fn(usize) -> f32 = v.as_ref();
         println!(
             "| {name} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
             median(pick(&safe_in_view, v)),
@@ -301,6 +349,9 @@ fn main() {
             mse(v)
         );
     }
+    // The verdict reads the first regression (all forks a label unless
+    // --train-futures says otherwise).
+    let reg = |i: usize| regressions[0].1[i];
     let reg_auc = auc(&pick(&safe, &reg), &pick(&doomed, &reg));
     let gap = median(pick(&safe_in_view, &label_of)) - median(pick(&safe_in_view, &reg));
     let verdict = if reg_auc < 0.9 || gap > 1.0 {
