@@ -82,7 +82,10 @@ fn parse_args() -> Args {
         a.train_futures = vec![a.futures];
     }
     if let Some(&n) = a.train_futures.iter().find(|&&n| n == 0 || n > a.futures) {
-        panic!("--train-futures {n}: between 1 and --futures ({})", a.futures);
+        panic!(
+            "--train-futures {n}: between 1 and --futures ({})",
+            a.futures
+        );
     }
     a
 }
@@ -227,6 +230,9 @@ fn train(
     fresh
 }
 
+/// Q(go) at held-out decision `i`, by one source.
+type Reading<'a> = Box<dyn Fn(usize) -> f32 + 'a>;
+
 fn median(mut v: Vec<f32>) -> f32 {
     if v.is_empty() {
         return f32::NAN;
@@ -332,8 +338,7 @@ fn main() {
     );
     println!("| --- | ---: | ---: | ---: | ---: | ---: |");
     let label_name = format!("label ({} futures)", a.futures);
-    let mut rows: Vec<(&str, Box<dyn Fn(usize) -> f32 + '_>)> =
-        vec![(label_name.as_str(), Box::new(label_of))];
+    let mut rows: Vec<(&str, Reading<'_>)> = vec![(label_name.as_str(), Box::new(label_of))];
     for (name, predicted) in &regressions {
         rows.push((name.as_str(), Box::new(move |i: usize| predicted[i])));
     }
