@@ -31,11 +31,22 @@ pub struct Cli {
 /// that sets a configuration key naming it in its help.
 pub fn command() -> clap::Command {
     use clap::CommandFactory;
-    Cli::command()
-        .mut_subcommand("replay", |c| with_keys(c, ReplayArgs::KEYS))
-        .mut_subcommand("learner", |c| with_keys(c, LearnerArgs::KEYS))
-        .mut_subcommand("actor", |c| with_keys(c, ActorArgs::KEYS))
-        .mut_subcommand("train", |c| with_keys(c, TrainArgs::KEYS))
+    let cli = Cli::command();
+    let names: Vec<String> = cli
+        .get_subcommands()
+        .map(|c| c.get_name().to_owned())
+        .collect();
+    // `mut_subcommand` moves the one it edits to the end: every one is
+    // edited in turn, so the order of `crossroads --help` stays declared.
+    names.iter().fold(cli, |cli, name| {
+        cli.mut_subcommand(name, |c| match c.get_name() {
+            "replay" => with_keys(c, ReplayArgs::KEYS),
+            "learner" => with_keys(c, LearnerArgs::KEYS),
+            "actor" => with_keys(c, ActorArgs::KEYS),
+            "train" => with_keys(c, TrainArgs::KEYS),
+            _ => c,
+        })
+    })
 }
 
 #[derive(Debug, Subcommand)]

@@ -203,9 +203,29 @@ pub fn layer<A>(args: &A, table: &[KeyFlag<A>], mut loader: ConfigLoader) -> Con
 /// Panics if `table` names a flag `cmd` lacks (a test parses the command
 /// line).
 pub fn with_keys<A>(cmd: clap::Command, table: &[KeyFlag<A>]) -> clap::Command {
-    table.iter().fold(cmd, |cmd, flag| {
+    if let Some(flag) = table
+        .iter()
+        .find(|f| !cmd.get_arguments().any(|a| a.get_id() == f.id))
+    {
+        panic!(
+            "{} has no flag {} for {}",
+            cmd.get_name(),
+            flag.id,
+            flag.key
+        );
+    }
+    let ids: Vec<String> = cmd
+        .get_arguments()
+        .map(|a| a.get_id().to_string())
+        .collect();
+    // `mut_arg` moves the flag it edits to the end: every flag is edited in
+    // turn, so the help keeps the declared order.
+    ids.iter().fold(cmd, |cmd, id| {
+        let Some(flag) = table.iter().find(|f| f.id == id.as_str()) else {
+            return cmd.mut_arg(id, |arg| arg);
+        };
         let named = flag.named();
-        cmd.mut_arg(flag.id, |arg| {
+        cmd.mut_arg(id, |arg| {
             let help = arg
                 .get_help()
                 .map_or_else(|| named.clone(), |h| format!("{h} {named}"));

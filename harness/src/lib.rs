@@ -1,17 +1,15 @@
 //! The experiment harness: what `crossroads` runs around the roles, as a
 //! library the binary calls with its parsed flags.
 //!
-//! - [`train`]: a whole training run on this machine (the replay, the
-//!   learner and the actors as child processes of this binary, the watch
-//!   loop, in-process greedy evaluations, the run folder).
+//! - [`train`]: a whole training run on this machine (every role a child
+//!   process, the watch loop, greedy evaluations, the run folder).
 //! - [`reproduce`]: the paper's tables, Figure 3 and the safety across
 //!   drivers: trains what is missing, evaluates and writes the reports.
 //! - [`eval`] and [`tune_ttc`]: a policy over seeded trials, the TTC
 //!   threshold sweep; [`sumo_check`]: our simulator against SUMO;
 //!   [`bench`]: throughput, memory and time to target.
 //! - [`experiments`]: the paper's run configurations, built in;
-//!   [`global`]: the options every command takes
-//!   ([`global::GlobalArgs`]);
+//!   [`global`]: the options every command takes;
 //!   [`network_policy`]: a trained Q-network (or an ensemble) as a
 //!   `crossroads_sim::Policy`; [`role`]: the runtime, signals and metrics
 //!   endpoint a role process shares; [`child`]: this program started as

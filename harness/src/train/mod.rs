@@ -1,30 +1,18 @@
 //! `crossroads train`: a whole training run on this machine, with the same
 //! roles and transports as a distributed one.
 //!
-//! It writes the run's configuration to `<out>/config.toml`, starts
-//! `crossroads replay`, `crossroads learner` and `actor.count` ×
-//! `crossroads actor` from this binary (each in its own process group,
-//! logging to `<out>/logs/`), and then watches: the learner's status and
-//! the replay's info over gRPC, the actors' `/metrics`, a progress bar.
-//! Every `train.eval_every` updates it fetches the latest weights and runs
-//! `train.eval_trials` greedy trials in this process (the same seeded trials
-//! each time, at most `train.eval_share` of the wall time), appends them to
-//! `<out>/curve.csv`, keeps the weights in `<out>/last/` and reports them
-//! to the learner (so its best checkpoint follows the same rule). Weights
-//! whose mean undiscounted return beats the best so far, or that meet the
-//! target, are re-measured on `train.confirm_trials` trials; the best by
-//! that figure are kept in `<out>/best/`, and the target counts as reached
-//! when such a figure meets it. It ends at the learner's update budget,
-//! the time budget, the target (`train.stop_at_target`) or Ctrl-C, stopping
-//! actors, then the learner (last checkpoint), then the replay (last
-//! snapshot).
-//!
-//! The job's parts, in the order a run meets them: this module (the flags
-//! layered into the configuration), [`prepare`] (the folder and the derived
-//! configuration), [`session`] (roles started and stopped in order, with
-//! [`procs`] for the processes and their addresses), [`watch`] (the loop),
-//! [`evaluate`] (evaluations and the best weights), [`record`] (the curve,
-//! the summary and the metrics it writes).
+//! It writes `<out>/config.toml`, starts the replay, the learner and
+//! `actor.count` actors from this binary (each in its own process group,
+//! logging to `<out>/logs/`) and watches them over gRPC and `/metrics`
+//! behind a progress bar. Every `train.eval_every` updates it runs
+//! `train.eval_trials` seeded greedy trials in this process (at most
+//! `train.eval_share` of the wall time) into `<out>/curve.csv`; weights
+//! that beat the best return or meet the target are re-measured on
+//! `train.confirm_trials` trials and the best kept in `<out>/best/`. It
+//! ends at the update or time budget, the target (`train.stop_at_target`)
+//! or Ctrl-C, stopping actors, learner and replay in that order. The parts,
+//! in the order a run meets them: this module (flags), [`prepare`],
+//! [`session`] (with [`procs`]), [`watch`], [`evaluate`], [`record`].
 
 mod evaluate;
 mod prepare;
