@@ -1,22 +1,22 @@
 //! Q(go) diagnosed before it is tuned: can the network tell a safe moment
-//! to go from a doomed one? Creep networks undervalue *go* where going is
-//! safe (`eval --risk 16 --missed`: medians of -2.5 to -4 for about +1):
-//! too thin a learning signal (*data*), or too poor an observation
-//! (*features*)? It drives `--episodes` greedy episodes of `--scenario`
-//! with `--policy`'s network and labels every `--every`-th decision before
-//! a *go* with the mean discounted return of going in `--futures` forks
-//! (the present, hidden cars included, then other random traffic): *safe*
-//! when every fork reached the goal, *doomed* when more than half collided.
-//! A fresh network of the same shape regresses Q(go) on four fifths of the
-//! episodes (Adam, `--updates` batches of `--batch`, labels averaging the
-//! first `--train-futures` forks; comma lists run one regression per pair,
+//! to go from a doomed one? Creep networks undervalue *go* where it is safe
+//! (`eval --risk 16 --missed`): too thin a learning signal (*data*), or too
+//! poor an observation (*features*)? It drives `--episodes` greedy episodes
+//! of `--scenario` with `--policy`'s network and labels every `--every`-th
+//! decision before a *go* with the mean discounted return of going in
+//! `--futures` forks (the present, hidden cars included, then other random
+//! traffic): *safe* when every fork reached the goal, *doomed* when more
+//! than half collided.
+//! A network of the same shape (`--start` fresh or from the policy's
+//! weights) regresses Q(go) on four fifths of the episodes (Adam,
+//! `--updates` batches of `--batch`, labels averaging the first
+//! `--train-futures` forks; comma lists run one regression per combination,
 //! the first giving the verdict); on the rest the regressions and the RL
 //! network are compared with the labels (medians at safe states in view and
 //! at doomed ones, AUC of safe over doomed). The verdict, fixed before the
 //! first run: *features* when the regression's AUC is below 0.9 or its
-//! median at safe states in view is more than 1 below their median label;
-//! *data* when it reaches both while the RL network does not. Results:
-//! reports/occlusion-ladder/README.md, "Q(go) diagnosed: data, not features".
+//! median at safe states in view is more than 1 below their median label,
+//! else *data*. Results: reports/occlusion-ladder/README.md and NOTES.md.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -39,6 +39,8 @@ struct Args {
     seed: u64,
     /// Adam updates, one regression per entry.
     updates: Vec<usize>,
+    /// Where each regression starts: `fresh` weights, or the `policy`'s.
+    start: Vec<String>,
     batch: usize,
     lr: f64,
     every: u32,
@@ -53,6 +55,7 @@ fn parse_args() -> Args {
         train_futures: Vec::new(),
         seed: 1,
         updates: vec![20_000],
+        start: vec!["fresh".to_owned()],
         batch: 256,
         lr: 1e-3,
         every: 2,
@@ -69,17 +72,25 @@ fn parse_args() -> Args {
             "--seed" => a.seed = value.parse().unwrap_or_else(|_| bad("a number")),
             "--train-futures" => a.train_futures = list(&value).unwrap_or_else(|| bad("counts")),
             "--updates" => a.updates = list(&value).unwrap_or_else(|| bad("counts")),
+            "--start" => a.start = list(&value).unwrap_or_else(|| bad("fresh or policy")),
             "--batch" => a.batch = value.parse().unwrap_or_else(|_| bad("a count")),
             "--lr" => a.lr = value.parse().unwrap_or_else(|_| bad("a number")),
             "--every" => a.every = value.parse().unwrap_or_else(|_| bad("a count")),
             _ => panic!(
                 "unknown flag {flag}; known: --policy --scenario --episodes --futures \
-                 --train-futures --seed --updates --batch --lr --every"
+                 --train-futures --seed --updates --start --batch --lr --every"
             ),
         }
     }
     if a.train_futures.is_empty() {
         a.train_futures = vec![a.futures];
+    }
+    if let Some(s) = a
+        .start
+        .iter()
+        .find(|s| !matches!(s.as_str(), "fresh" | "policy"))
+    {
+        panic!("--start {s}: fresh or policy");
     }
     if let Some(&n) = a.train_futures.iter().find(|&&n| n == 0 || n > a.futures) {
         panic!(
@@ -184,17 +195,21 @@ fn collect(a: &Args, net: &QNetwork, scenario: &Arc<Scenario>, go: usize) -> Vec
     out
 }
 
-/// A fresh network of `net`'s shape regressing Q(go) on the mean of each
-/// sample's first `forks` returns, `updates` Adam steps.
+/// A network of `net`'s shape (fresh, or `net`'s own weights read again
+/// from `policy`) regressing Q(go) on the mean of each sample's first
+/// `forks` returns, `updates` Adam steps.
 fn train(
     a: &Args,
     net: &QNetwork,
+    policy: Option<&[u8]>,
     train: &[&Sample],
     go: usize,
-    forks: u32,
-    updates: usize,
+    (forks, updates): (u32, usize),
 ) -> QNetwork {
-    let fresh = QNetwork::new(net.spec().clone(), a.seed).expect("network");
+    let fresh = match policy {
+        Some(bytes) => QNetwork::from_safetensors(bytes).expect("the policy").0,
+        None => QNetwork::new(net.spec().clone(), a.seed).expect("network"),
+    };
     let mut opt = tch::nn::Adam::default()
         .build(fresh.var_store(), a.lr)
         .expect("optimizer");
@@ -288,22 +303,27 @@ fn main() {
     let flat: Vec<f32> = held.iter().flat_map(|s| s.obs.iter().copied()).collect();
     // One regression per (forks a label, updates) pair, in the order given.
     let mut regressions: Vec<(String, Vec<f32>)> = Vec::new();
-    for &forks in &a.train_futures {
-        for &updates in &a.updates {
-            eprintln!("  regression on {forks}-fork labels, {updates} updates");
-            let regression = train(&a, &net, &fit, go, forks, updates);
-            let predicted: Vec<f32> = tch::no_grad(|| {
-                let x = Tensor::from_slice(&flat).view([held.len() as i64, len as i64]);
-                let q = regression
-                    .q_values(&x)
-                    .expect("forward")
-                    .select(1, go as i64);
-                Vec::<f32>::try_from(&q).expect("values")
-            });
-            regressions.push((
-                format!("regression ({forks}-fork labels, {updates} updates)"),
-                predicted,
-            ));
+    for start in &a.start {
+        for &forks in &a.train_futures {
+            for &updates in &a.updates {
+                eprintln!(
+                    "  regression from {start} weights on {forks}-fork labels, {updates} updates"
+                );
+                let policy = (start == "policy").then_some(bytes.as_slice());
+                let regression = train(&a, &net, policy, &fit, go, (forks, updates));
+                let predicted: Vec<f32> = tch::no_grad(|| {
+                    let x = Tensor::from_slice(&flat).view([held.len() as i64, len as i64]);
+                    let q = regression
+                        .q_values(&x)
+                        .expect("forward")
+                        .select(1, go as i64);
+                    Vec::<f32>::try_from(&q).expect("values")
+                });
+                regressions.push((
+                    format!("regression from {start} ({forks}-fork labels, {updates} updates)"),
+                    predicted,
+                ));
+            }
         }
     }
     let pick = |f: &dyn Fn(&Sample) -> bool, v: &dyn Fn(usize) -> f32| -> Vec<f32> {
