@@ -11,9 +11,9 @@
 //! weights) regresses Q(go) on four fifths of the episodes (Adam,
 //! `--updates` batches of `--batch`, labels averaging the first
 //! `--train-futures` forks; comma lists run one regression per combination,
-//! the first giving the verdict); on the rest the regressions and the RL
-//! network are compared with the labels (medians at safe states in view and
-//! at doomed ones, AUC of safe over doomed). The verdict, fixed before the
+//! the fresh one on all forks giving the verdict); on the rest they and the
+//! RL network are compared with the labels (medians at safe states in view
+//! and at doomed ones, AUC of safe over doomed). The verdict, fixed before the
 //! first run: *features* when the regression's AUC is below 0.9 or its
 //! median at safe states in view is more than 1 below their median label,
 //! else *data*. Results: reports/occlusion-ladder/README.md and NOTES.md.
@@ -39,8 +39,8 @@ struct Args {
     seed: u64,
     /// Adam updates, one regression per entry.
     updates: Vec<usize>,
-    /// Where each regression starts: `fresh` weights, or the `policy`'s.
-    start: Vec<String>,
+    /// Where each regression starts, one regression per entry.
+    start: Vec<Start>,
     batch: usize,
     lr: f64,
     every: u32,
@@ -55,7 +55,7 @@ fn parse_args() -> Args {
         train_futures: Vec::new(),
         seed: 1,
         updates: vec![20_000],
-        start: vec!["fresh".to_owned()],
+        start: vec![Start::Fresh],
         batch: 256,
         lr: 1e-3,
         every: 2,
@@ -85,13 +85,6 @@ fn parse_args() -> Args {
     if a.train_futures.is_empty() {
         a.train_futures = vec![a.futures];
     }
-    if let Some(s) = a
-        .start
-        .iter()
-        .find(|s| !matches!(s.as_str(), "fresh" | "policy"))
-    {
-        panic!("--start {s}: fresh or policy");
-    }
     if let Some(&n) = a.train_futures.iter().find(|&&n| n == 0 || n > a.futures) {
         panic!(
             "--train-futures {n}: between 1 and --futures ({})",
@@ -99,6 +92,35 @@ fn parse_args() -> Args {
         );
     }
     a
+}
+
+/// Where a regression's weights start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Start {
+    /// New weights from `--seed`.
+    Fresh,
+    /// The RL network's own weights.
+    Policy,
+}
+
+impl std::str::FromStr for Start {
+    type Err = ();
+    fn from_str(s: &str) -> Result<Self, ()> {
+        match s {
+            "fresh" => Ok(Self::Fresh),
+            "policy" => Ok(Self::Policy),
+            _ => Err(()),
+        }
+    }
+}
+
+impl std::fmt::Display for Start {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Fresh => "fresh",
+            Self::Policy => "policy",
+        })
+    }
 }
 
 /// A comma-separated list of counts (`1,16`), `None` if any is not one.
@@ -303,13 +325,22 @@ fn main() {
     let flat: Vec<f32> = held.iter().flat_map(|s| s.obs.iter().copied()).collect();
     // One regression per (forks a label, updates) pair, in the order given.
     let mut regressions: Vec<(String, Vec<f32>)> = Vec::new();
-    for start in &a.start {
+    // The regression the verdict was written for: fresh weights, labels of
+    // every fork, the largest budget.
+    let mut judged: Option<(usize, usize)> = None;
+    for &start in &a.start {
         for &forks in &a.train_futures {
             for &updates in &a.updates {
                 eprintln!(
                     "  regression from {start} weights on {forks}-fork labels, {updates} updates"
                 );
-                let policy = (start == "policy").then_some(bytes.as_slice());
+                let policy = (start == Start::Policy).then_some(bytes.as_slice());
+                if start == Start::Fresh
+                    && forks == a.futures
+                    && judged.is_none_or(|(_, u)| updates > u)
+                {
+                    judged = Some((regressions.len(), updates));
+                }
                 let regression = train(&a, &net, policy, &fit, go, (forks, updates));
                 let predicted: Vec<f32> = tch::no_grad(|| {
                     let x = Tensor::from_slice(&flat).view([held.len() as i64, len as i64]);
@@ -374,9 +405,15 @@ fn main() {
             mse(v)
         );
     }
-    // The verdict reads the first regression (all forks a label unless
-    // --train-futures says otherwise).
-    let reg = |i: usize| regressions[0].1[i];
+    let Some((judged, _)) = judged else {
+        println!(
+            "verdict: none (it reads a regression from fresh weights on labels of all {} forks; \
+             add fresh to --start and {} to --train-futures)",
+            a.futures, a.futures
+        );
+        return;
+    };
+    let reg = |i: usize| regressions[judged].1[i];
     let reg_auc = auc(&pick(&safe, &reg), &pick(&doomed, &reg));
     let gap = median(pick(&safe_in_view, &label_of)) - median(pick(&safe_in_view, &reg));
     let verdict = if reg_auc < 0.9 || gap > 1.0 {
