@@ -99,6 +99,13 @@ pub struct LearnerConfig {
     pub early_target_period: Option<u64>,
     /// Soft update fraction per update. In (0, 1].
     pub target_tau: f64,
+    /// Multiplies the loss weight of exact *go* labels: items whose action
+    /// is the action set's absorbing *go* (ttg, creep) with discount 0, so
+    /// nothing in their target is bootstrapped. Counterfactual gos
+    /// (`actor.go_forks`) are among them. Priorities are unchanged. 1 (the
+    /// default) weighs them as any item; the sequential set has no such
+    /// *go* and takes only 1. Finite, above 0.
+    pub go_label_weight: f64,
     /// Importance-sampling exponent at the start of the run (Ape-X: 0.4).
     /// In [0, 1].
     pub importance_beta: f64,
@@ -169,6 +176,7 @@ impl Default for LearnerConfig {
             target_update: TargetUpdate::Period,
             target_period: 2_500,
             target_tau: 0.005,
+            go_label_weight: 1.0,
             early_updates: 0,
             early_learning_rate: None,
             early_target_period: None,
@@ -218,6 +226,7 @@ impl LearnerConfig {
             ("rmsprop_eps", self.rmsprop_eps),
             ("adam_eps", self.adam_eps),
             ("huber_delta", self.huber_delta),
+            ("go_label_weight", self.go_label_weight),
         ] {
             problems.check(
                 positive(v),

@@ -146,6 +146,16 @@ impl Config {
         problems.extend(self.actor.validate());
         problems.extend(self.learner.validate());
         problems.extend(self.train.validate());
+        if self.learner.go_label_weight != 1.0 && self.sim.action_set == "sequential" {
+            problems.push((
+                "learner.go_label_weight".to_owned(),
+                format!(
+                    "weighs the absorbing go of ttg or creep actions, and sim.action_set is \
+                     sequential (no absorbing go): leave it at 1, got {}",
+                    self.learner.go_label_weight
+                ),
+            ));
+        }
         problems
     }
 

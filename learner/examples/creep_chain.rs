@@ -469,6 +469,7 @@ fn run(o: &Options, seed: u64) {
         target_period: o.target_period,
         target_tau: 0.005,
         priority_eps: 1e-6,
+        go_labels: None,
     })
     .expect("trainer");
     let mut acting = QNetwork::new(spec.clone(), seed).expect("network");

@@ -37,4 +37,4 @@ pub use error::LearnerError;
 pub use metrics::LearnerMetrics;
 pub use optimizer::{Optimizer, OptimizerConfig};
 pub use server::{RunningLearner, run, start};
-pub use trainer::{EarlyPhase, Trainer, TrainerConfig, UpdateStats};
+pub use trainer::{EarlyPhase, GoLabels, Trainer, TrainerConfig, UpdateStats};

@@ -17,7 +17,7 @@
 //! CPU.
 
 use crossroads_config::{LearnerConfig, SimConfig, TargetUpdate};
-use crossroads_model::{NetworkSpec, Precision, QNetwork, network_spec};
+use crossroads_model::{NetworkSpec, Precision, QNetwork, absorbing_go_of, network_spec};
 use tch::{Device, Kind, Tensor};
 
 use crate::LearnerError;
@@ -46,6 +46,48 @@ pub struct TrainerConfig {
     pub target_tau: f64,
     /// Added to |TD error| for the new priority.
     pub priority_eps: f64,
+    /// Exact *go* labels weighed apart (`learner.go_label_weight`); `None`
+    /// weighs every item by its importance alone.
+    pub go_labels: Option<GoLabels>,
+}
+
+/// Items whose action is the absorbing *go* `action` and whose discount is
+/// 0 (nothing bootstrapped: an exact label) have their importance weight
+/// multiplied by `weight` in the loss; their priorities are unchanged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GoLabels {
+    /// The action set's absorbing *go*.
+    pub action: usize,
+    /// The multiplier.
+    pub weight: f64,
+}
+
+impl GoLabels {
+    /// From `learner.go_label_weight` and the action set; `None` at 1.
+    /// An error for another weight where the set has no absorbing *go*
+    /// (configuration validation says so first).
+    fn from_config(action_set: &str, weight: f64) -> Result<Option<Self>, LearnerError> {
+        if weight == 1.0 {
+            return Ok(None);
+        }
+        let action = absorbing_go_of(action_set)
+            .map_err(|e| LearnerError::Config(e.to_string()))?
+            .ok_or_else(|| {
+            LearnerError::Config(format!(
+                "learner.go_label_weight is {weight}, and the {action_set} action set has no absorbing go to weigh"
+            ))
+        })?;
+        Ok(Some(Self { action, weight }))
+    }
+
+    /// `weights` with this rule applied to `batch`'s exact *go* labels.
+    fn apply(&self, weights: &Tensor, actions: &Tensor, discounts: &Tensor) -> Tensor {
+        let exact = actions
+            .eq(self.action as i64)
+            .logical_and(&discounts.eq(0.0));
+        let scale = exact.to_kind(weights.kind()) * (self.weight - 1.0) + 1.0;
+        weights * scale
+    }
 }
 
 impl TrainerConfig {
@@ -62,6 +104,7 @@ impl TrainerConfig {
             target_period: c.target_period,
             target_tau: c.target_tau,
             priority_eps: c.priority_eps,
+            go_labels: GoLabels::from_config(&sim.action_set, c.go_label_weight)?,
         })
     }
 }
@@ -255,9 +298,16 @@ impl Trainer {
             ))
         })?;
 
-        // Loss: Huber on the TD errors, weighted by importance.
+        // Loss: Huber on the TD errors, weighted by importance (and exact
+        // go labels by `learner.go_label_weight`).
         let q_sa = taken(&self.online.q_values_of(&batch.obs)?, &batch.actions);
-        let loss = weighted_huber(&q_sa, &targets, &batch.weights, c.huber_delta);
+        let loss = match c.go_labels {
+            None => weighted_huber(&q_sa, &targets, &batch.weights, c.huber_delta),
+            Some(go) => {
+                let weights = go.apply(&batch.weights, &batch.actions, &batch.discounts);
+                weighted_huber(&q_sa, &targets, &weights, c.huber_delta)
+            }
+        };
         let loss_value = loss.double_value(&[]);
         if !loss_value.is_finite() {
             return Err(LearnerError::Diverged {

@@ -29,7 +29,8 @@ pub mod weights;
 
 pub use config::network_spec;
 pub use crossroads_types::spec::{
-    self as spec, NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of,
+    self as spec, NetworkSpec, ObservationLayout, SpecError, TrunkKind, absorbing_go_of,
+    num_actions_of,
 };
 pub use device::{CudaSupport, device_name, resolve_device};
 pub use error::ModelError;

@@ -222,8 +222,8 @@ fn bench_learner_prints_measured_figures() {
     }
 }
 
-/// The action counts `crossroads_types` knows by name are the
-/// simulator's. (Observation layouts need no such check: the simulator
+/// The action counts and absorbing *go*s `crossroads_types` knows by
+/// name are the simulator's. (Observation layouts need no such check: the simulator
 /// gives them, `crossroads_sim::observation_layout`.)
 #[test]
 fn action_set_sizes_match_the_simulator() {
@@ -231,6 +231,12 @@ fn action_set_sizes_match_the_simulator() {
         assert_eq!(
             crossroads_model::num_actions_of(set.name()).expect("known set") as usize,
             set.num_actions()
+        );
+        assert_eq!(
+            crossroads_model::absorbing_go_of(set.name()).expect("known set"),
+            set.absorbing_go(),
+            "{}",
+            set.name()
         );
     }
 }

@@ -34,6 +34,8 @@ pub use checkpoint::Manifest;
 pub use codec::ObservationEncoding;
 pub use columns::Columns;
 pub use sample::{PrioritiesUpdated, Sample};
-pub use spec::{NetworkSpec, ObservationLayout, SpecError, TrunkKind, num_actions_of};
+pub use spec::{
+    NetworkSpec, ObservationLayout, SpecError, TrunkKind, absorbing_go_of, num_actions_of,
+};
 pub use tensors::F32Tensor;
 pub use weights::{Weights, WeightsMeta};

@@ -145,6 +145,17 @@ pub fn num_actions_of(action_set: &str) -> Result<i64, SpecError> {
     }
 }
 
+/// The index of an action set's absorbing *go* (the one action that ends
+/// the episode, `ttg` 0, `creep` 2), `None` for `sequential`.
+pub fn absorbing_go_of(action_set: &str) -> Result<Option<usize>, SpecError> {
+    num_actions_of(action_set)?;
+    Ok(match action_set {
+        "ttg" => Some(0),
+        "creep" => Some(2),
+        _ => None,
+    })
+}
+
 /// The trunk between the observation and the dueling heads.
 #[derive(
     Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, schemars::JsonSchema,

@@ -522,6 +522,40 @@ fn security_settings_are_checked_when_the_config_loads() {
     assert!(!config.to_toml().contains("api_token"));
 }
 
+/// `learner.go_label_weight` weighs the absorbing go of ttg and creep:
+/// above 0, and only 1 where the action set has no such go.
+#[test]
+fn the_go_label_weight_needs_an_absorbing_go() {
+    let config = ConfigLoader::new()
+        .without_env()
+        .sets(["sim.action_set=creep", "learner.go_label_weight=5"])
+        .load()
+        .expect("creep has an absorbing go");
+    assert_eq!(config.learner.go_label_weight, 5.0);
+    for (sets, says) in [
+        (
+            ["sim.action_set=ttg", "learner.go_label_weight=0"],
+            "above 0",
+        ),
+        (
+            ["sim.action_set=sequential", "learner.go_label_weight=5"],
+            "no absorbing go",
+        ),
+    ] {
+        let err = ConfigLoader::new()
+            .without_env()
+            .sets(sets)
+            .load()
+            .expect_err("refused");
+        let p = problems(&err);
+        assert!(
+            p.iter()
+                .any(|(_, k, m)| k == "learner.go_label_weight" && m.contains(says)),
+            "{says} missing from {p:?}"
+        );
+    }
+}
+
 #[test]
 fn early_phases_of_the_replay_ratio_and_the_learner_are_checked() {
     let config = ConfigLoader::new()

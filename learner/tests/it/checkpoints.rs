@@ -26,6 +26,7 @@ fn config(optimizer: OptimizerConfig) -> TrainerConfig {
         target_period: 4,
         target_tau: 0.01,
         priority_eps: 1e-6,
+        go_labels: None,
     }
 }
 

@@ -47,6 +47,7 @@ fn config(spec: NetworkSpec, optimizer: OptimizerConfig) -> TrainerConfig {
         target_period: 2,
         target_tau: 0.01,
         priority_eps: 1e-6,
+        go_labels: None,
     }
 }
 

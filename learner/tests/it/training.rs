@@ -229,6 +229,54 @@ fn trainer(spec: NetworkSpec, optimizer: OptimizerConfig, target: TargetUpdate) 
     trainer_with_delta(spec, optimizer, target, 1.0)
 }
 
+/// `learner.go_label_weight`: an exact *go* label (the absorbing go, its
+/// discount 0) weighs in the loss as if its importance weight were W
+/// times larger, and its priority is what it would be without the rule.
+#[test]
+fn exact_go_labels_weigh_more_in_the_loss_and_keep_their_priorities() {
+    let chain = Chain::new();
+    let spec = toy_spec(3, 2, vec![16]);
+    let plain = chain.batch(&spec);
+    let optimizer = OptimizerConfig::Rmsprop {
+        lr: 0.003,
+        decay: 0.95,
+        eps: 0.01,
+    };
+    // In the chain, action 0 ends the episode: the exact labels.
+    let go = crossroads_learner::GoLabels {
+        action: 0,
+        weight: 5.0,
+    };
+    let exact: Vec<bool> = chain.moves.iter().map(|m| m.1 == 0).collect();
+    assert!(exact.iter().any(|&e| e) && exact.iter().any(|&e| !e));
+    let mut scaled = chain.batch(&spec);
+    let w: Vec<f32> = exact.iter().map(|&e| if e { 5.0 } else { 1.0 }).collect();
+    scaled.weights = Tensor::from_slice(&w);
+
+    let mut by_hand = trainer(spec.clone(), optimizer, TargetUpdate::Period);
+    let mut unweighed = trainer(spec, optimizer, TargetUpdate::Period);
+    let mut weighed = Trainer::new(TrainerConfig {
+        go_labels: Some(go),
+        ..unweighed.config().clone()
+    })
+    .unwrap();
+    let first = weighed.update(&plain).unwrap();
+    let first_plain = unweighed.update(&plain).unwrap();
+    assert!(
+        first.loss > first_plain.loss * 1.5,
+        "{first:?} {first_plain:?}"
+    );
+    assert_eq!(first.priorities, first_plain.priorities);
+    let first_by_hand = by_hand.update(&scaled).unwrap();
+    assert_eq!(first.loss.to_bits(), first_by_hand.loss.to_bits());
+    for _ in 0..20 {
+        let a = weighed.update(&plain).unwrap();
+        let b = by_hand.update(&scaled).unwrap();
+        assert_eq!(a.loss.to_bits(), b.loss.to_bits());
+        assert_eq!(a.priorities, b.priorities);
+    }
+}
+
 fn trainer_with_delta(
     spec: NetworkSpec,
     optimizer: OptimizerConfig,
@@ -245,6 +293,7 @@ fn trainer_with_delta(
         target_period: 25,
         target_tau: 0.05,
         priority_eps: 1e-6,
+        go_labels: None,
     })
     .expect("test setup")
 }
