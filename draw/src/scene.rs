@@ -1,6 +1,6 @@
 //! A [`Scene`] rasterised with plotters: background, shapes back to front,
-//! the caption and a legend of the car colours, the same code for PNG, SVG
-//! and each frame of a GIF.
+//! the caption and a legend of the car colours, the same code for PNG, SVG,
+//! each frame of a GIF and the pixels of [`rgb`].
 
 use std::path::Path;
 
@@ -24,6 +24,19 @@ pub fn write_svg(path: &Path, scene: &Scene) -> Result<(), DrawError> {
     let root = SVGBackend::new(path, scene.size).into_drawing_area();
     draw(&root, scene).map_err(|e| DrawError::draw(path, e))?;
     root.present().map_err(|e| DrawError::write(path, e))
+}
+
+/// Rasterises `scene` into RGB bytes, row by row from the top, three a
+/// pixel: the picture [`write_png`] writes (the Python face's `render`).
+pub fn rgb(scene: &Scene) -> Result<Vec<u8>, DrawError> {
+    let (w, h) = scene.size;
+    let mut pixels = vec![0u8; 3 * w as usize * h as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, scene.size).into_drawing_area();
+        draw(&root, scene).map_err(DrawError::raster)?;
+        root.present().map_err(DrawError::raster)?;
+    }
+    Ok(pixels)
 }
 
 /// Writes `scenes` to `path` as an animated GIF, one frame per 0.2 s
