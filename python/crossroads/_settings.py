@@ -37,6 +37,9 @@ DEFAULT_CONFIG: dict[str, Any] = {
     "render_scale": None,
 }
 
+#: Outcome names by the native step's codes (0 while running).
+OUTCOMES = np.array([None, "success", "collision", "timeout"], dtype=object)
+
 NATIVE_KEYS = ("scenario", "actions", "drivers", "observation", "gamma", "collision_reward")
 
 

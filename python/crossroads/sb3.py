@@ -18,8 +18,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from crossroads import _native
-from crossroads._settings import Layout, native_kwargs, resolve
-from crossroads.vector import OUTCOMES
+from crossroads._settings import OUTCOMES, Layout, native_kwargs, resolve
 
 
 class CrossroadsVecEnv(VecEnv):

@@ -11,15 +11,12 @@ from gymnasium.vector import VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from crossroads import _native
-from crossroads._settings import Layout, native_kwargs, resolve
+from crossroads._settings import OUTCOMES, Layout, native_kwargs, resolve
 
 try:  # Gymnasium >= 1.1
     from gymnasium.vector import AutoresetMode
 except ImportError:  # pragma: no cover - Gymnasium 1.0: next-step only
     AutoresetMode = None
-
-#: Outcome codes of the native step, by name.
-OUTCOMES = np.array([None, "success", "collision", "timeout"], dtype=object)
 
 
 def _mode_name(mode: Any) -> str:
