@@ -122,7 +122,23 @@ class CrossroadsVectorEnv(VectorEnv):
             "episode_seed": episode_seed,
             "_episode_seed": every.copy(),
         }
-        has_step = stepped if final is None else stepped & ~final[0]
+        if final is None:
+            # Where an environment only reset (next-step mode), the native
+            # step left steps, discount and outcome at 0, as SyncVectorEnv.
+            if stepped.any():
+                infos.update(
+                    steps=steps,
+                    _steps=stepped,
+                    discount=discount,
+                    _discount=stepped.copy(),
+                    outcome=OUTCOMES[outcome],
+                    _outcome=stepped.copy(),
+                    is_success=outcome == 1,
+                    _is_success=stepped.copy(),
+                )
+            return self._layout.shape(obs), rewards, terminated, truncated, infos
+        # Same-step mode with endings: their step infos go to final_info.
+        has_step = ~final[0]
         if has_step.any():
             names = OUTCOMES[outcome]
             names[~has_step] = None
@@ -136,36 +152,35 @@ class CrossroadsVectorEnv(VectorEnv):
                 is_success=(outcome == 1) & has_step,
                 _is_success=has_step.copy(),
             )
-        if final is not None:
-            ended, last, final_trial, final_seed = final
-            final_obs = np.full(self.num_envs, None, dtype=object)
-            shaped = self._layout.shape(last)
-            for i in np.flatnonzero(ended):
-                final_obs[i] = (
-                    shaped[i] if self._layout.kind == "flat"
-                    else {k: v[i] for k, v in shaped.items()}
-                )
-            names = OUTCOMES[outcome]
-            names[~ended] = None
-            infos["final_obs"] = final_obs
-            infos["_final_obs"] = ended
-            infos["final_info"] = {
-                "seed": np.where(ended, base, 0).astype(np.int64),
-                "_seed": ended.copy(),
-                "trial": np.where(ended, final_trial, 0).astype(np.int64),
-                "_trial": ended.copy(),
-                "episode_seed": np.where(ended, final_seed, 0).astype(np.uint64),
-                "_episode_seed": ended.copy(),
-                "steps": np.where(ended, steps, 0),
-                "_steps": ended.copy(),
-                "discount": np.where(ended, discount, 0.0),
-                "_discount": ended.copy(),
-                "outcome": names,
-                "_outcome": ended.copy(),
-                "is_success": (outcome == 1) & ended,
-                "_is_success": ended.copy(),
-            }
-            infos["_final_info"] = ended.copy()
+        ended, last, final_trial, final_seed = final
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        shaped = self._layout.shape(last)
+        for i in np.flatnonzero(ended):
+            final_obs[i] = (
+                shaped[i] if self._layout.kind == "flat"
+                else {k: v[i] for k, v in shaped.items()}
+            )
+        names = OUTCOMES[outcome]
+        names[~ended] = None
+        infos["final_obs"] = final_obs
+        infos["_final_obs"] = ended
+        infos["final_info"] = {
+            "seed": np.where(ended, base, 0).astype(np.int64),
+            "_seed": ended.copy(),
+            "trial": np.where(ended, final_trial, 0).astype(np.int64),
+            "_trial": ended.copy(),
+            "episode_seed": np.where(ended, final_seed, 0).astype(np.uint64),
+            "_episode_seed": ended.copy(),
+            "steps": np.where(ended, steps, 0),
+            "_steps": ended.copy(),
+            "discount": np.where(ended, discount, 0.0),
+            "_discount": ended.copy(),
+            "outcome": names,
+            "_outcome": ended.copy(),
+            "is_success": (outcome == 1) & ended,
+            "_is_success": ended.copy(),
+        }
+        infos["_final_info"] = ended.copy()
         return self._layout.shape(obs), rewards, terminated, truncated, infos
 
     def render(self) -> tuple[np.ndarray, ...] | None:

@@ -51,6 +51,21 @@ fn episode_seed(base: u64, trial: u64) -> u64 {
     crossroads_sim::episode_seed(base, trial)
 }
 
+/// Random TTG decisions per second of the simulator alone on one thread,
+/// each followed by writing the observation (`crossroads bench sim`'s
+/// figure), measured for about `2 * seconds`: the reference for the
+/// Python face's throughput on the same machine.
+#[pyfunction]
+#[pyo3(signature = (scenario="right", seconds=1.0))]
+fn bench_simulator(py: Python<'_>, scenario: &str, seconds: f64) -> PyResult<f64> {
+    let scenario =
+        std::sync::Arc::new(crossroads_sim::Scenario::load(scenario).map_err(value_error)?);
+    let min = std::time::Duration::from_secs_f64(seconds.max(0.01));
+    py.detach(|| crossroads_sim::bench_scenario(&scenario, min))
+        .map(|f| f.decisions_per_s)
+        .map_err(value_error)
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<env::PyEnv>()?;
@@ -59,6 +74,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<baselines::PyShield>()?;
     m.add_function(wrap_pyfunction!(builtin_scenarios, m)?)?;
     m.add_function(wrap_pyfunction!(episode_seed, m)?)?;
+    m.add_function(wrap_pyfunction!(bench_simulator, m)?)?;
     m.add("DRIVER_PRESETS", crossroads_sim::DRIVER_PRESETS.to_vec())?;
     Ok(())
 }

@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use crossroads_sim::SimError;
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1};
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 use rayon::prelude::*;
@@ -300,8 +300,14 @@ impl PyVecEnv {
         }
         let (len, mode, gamma) = (self.obs_len, self.mode, self.gamma);
         let same_step = mode == Autoreset::SameStep;
-        let mut obs = vec![0.0f32; n * len];
-        let mut last = vec![0.0f32; if same_step { n * len } else { 0 }];
+        // numpy's own zeroed arrays: cheaper to get each step than large
+        // fresh Rust vectors.
+        let obs_array = PyArray2::<f32>::zeros(py, [n, len], false);
+        let last_array = PyArray2::<f32>::zeros(py, [if same_step { n } else { 0 }, len], false);
+        let mut obs_view = obs_array.readwrite();
+        let mut last_view = last_array.readwrite();
+        let obs = obs_view.as_slice_mut().map_err(value_error)?;
+        let last = last_view.as_slice_mut().map_err(value_error)?;
         let mut rows = vec![Row::default(); n];
         let slots = &mut self.slots;
         let pool = self.pool.as_ref();
@@ -333,8 +339,9 @@ impl PyVecEnv {
             }
         });
         outcome.map_err(value_error)?;
+        drop((obs_view, last_view));
 
-        let obs = self.rows_to_array(py, obs)?.into_any();
+        let obs = obs_array.into_any();
         let col = |f: &dyn Fn(&Row) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
         let flag = |f: &dyn Fn(&Row) -> bool| -> Vec<bool> { rows.iter().map(f).collect() };
         let rewards = col(&|r| r.reward).into_pyarray(py).into_any();
@@ -349,7 +356,7 @@ impl PyVecEnv {
         let (base, trial, seed) = self.seed_arrays(py);
         let final_part = if rows.iter().any(|r| r.ended) {
             let ended = flag(&|r| r.ended).into_pyarray(py).into_any();
-            let last = self.rows_to_array(py, last)?.into_any();
+            let last = last_array.into_any();
             let ft: Vec<u64> = rows.iter().map(|r| r.final_trial).collect();
             let fs: Vec<u64> = rows.iter().map(|r| r.final_seed).collect();
             PyTuple::new(
