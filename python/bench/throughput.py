@@ -63,7 +63,11 @@ def vector(envs, seconds: float) -> float:
         for _ in range(64):
             _, _, _, _, info = envs.step(actions[k % len(actions)])
             k += 1
-            n += int(np.count_nonzero(info["_steps"])) if "_steps" in info else 0
+            # Those that stepped: their step infos, or in same-step mode
+            # for an episode that ended, its final info.
+            for mask in ("_steps", "_final_info"):
+                if mask in info:
+                    n += int(np.count_nonzero(info[mask]))
         elapsed = time.perf_counter() - start
         if elapsed >= seconds:
             return n / elapsed
