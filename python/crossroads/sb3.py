@@ -91,12 +91,12 @@ class CrossroadsVecEnv(VecEnv):
         if final is not None:
             _ended, last, final_trial, final_seed = final
             shaped = self._layout.shape(last)
-            for i in np.flatnonzero(dones):
+            for j, i in enumerate(np.flatnonzero(dones)):
                 infos[i]["trial"] = int(final_trial[i])
                 infos[i]["episode_seed"] = final_seed[i]
                 infos[i]["terminal_observation"] = (
-                    shaped[i] if self._layout.kind == "flat"
-                    else {k: v[i] for k, v in shaped.items()}
+                    shaped[j] if self._layout.kind == "flat"
+                    else {k: v[j] for k, v in shaped.items()}
                 )
                 self.reset_infos[i] = {
                     "seed": int(base[i]),

@@ -155,10 +155,10 @@ class CrossroadsVectorEnv(VectorEnv):
         ended, last, final_trial, final_seed = final
         final_obs = np.full(self.num_envs, None, dtype=object)
         shaped = self._layout.shape(last)
-        for i in np.flatnonzero(ended):
+        for j, i in enumerate(np.flatnonzero(ended)):
             final_obs[i] = (
-                shaped[i] if self._layout.kind == "flat"
-                else {k: v[i] for k, v in shaped.items()}
+                shaped[j] if self._layout.kind == "flat"
+                else {k: v[j] for k, v in shaped.items()}
             )
         names = OUTCOMES[outcome]
         names[~ended] = None

@@ -87,6 +87,7 @@ impl Slot {
         if r.done {
             match (mode, final_obs) {
                 (Autoreset::SameStep, Some(last)) => {
+                    last.fill(0.0);
                     self.episode.observe(last);
                     row.ended = true;
                     row.final_trial = self.episode.trial();
@@ -128,6 +129,9 @@ pub struct PyVecEnv {
     obs_len: usize,
     gamma: f64,
     mode: Autoreset,
+    /// Last observations of the episodes that end in a step (same-step
+    /// mode), a row per environment.
+    last: Vec<f32>,
     /// A pool of its own for more than one thread; `None` steps on the
     /// calling thread.
     pool: Option<rayon::ThreadPool>,
@@ -162,13 +166,14 @@ impl PyVecEnv {
         )
     }
 
+    /// `flat`, rows of one observation each, as a numpy array.
     fn rows_to_array<'py>(
         &self,
         py: Python<'py>,
         flat: Vec<f32>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         Ok(
-            Array2::from_shape_vec((self.slots.len(), self.obs_len), flat)
+            Array2::from_shape_vec((flat.len() / self.obs_len, self.obs_len), flat)
                 .map_err(value_error)?
                 .into_pyarray(py),
         )
@@ -236,6 +241,7 @@ impl PyVecEnv {
             obs_len: spec.len(),
             gamma,
             mode,
+            last: Vec::new(),
             pool,
         })
     }
@@ -284,7 +290,8 @@ impl PyVecEnv {
     /// running, 1 success, 2 collision, 3 timeout; the seed arrays are of
     /// the episode now running; `final` is `None`, or in same-step mode
     /// where an episode ended `(ended, final_obs, final_trial,
-    /// final_episode_seed)`.
+    /// final_episode_seed)`, `final_obs` a row for each ended environment
+    /// in order.
     fn step<'py>(
         &mut self,
         py: Python<'py>,
@@ -303,11 +310,12 @@ impl PyVecEnv {
         // numpy's own zeroed arrays: cheaper to get each step than large
         // fresh Rust vectors.
         let obs_array = PyArray2::<f32>::zeros(py, [n, len], false);
-        let last_array = PyArray2::<f32>::zeros(py, [if same_step { n } else { 0 }, len], false);
         let mut obs_view = obs_array.readwrite();
-        let mut last_view = last_array.readwrite();
         let obs = obs_view.as_slice_mut().map_err(value_error)?;
-        let last = last_view.as_slice_mut().map_err(value_error)?;
+        // Last observations go to rows of a buffer kept across steps; the
+        // ended environments' rows are copied out below.
+        self.last.resize(if same_step { n * len } else { 0 }, 0.0);
+        let last = &mut self.last;
         let mut rows = vec![Row::default(); n];
         let slots = &mut self.slots;
         let pool = self.pool.as_ref();
@@ -339,7 +347,7 @@ impl PyVecEnv {
             }
         });
         outcome.map_err(value_error)?;
-        drop((obs_view, last_view));
+        drop(obs_view);
 
         let obs = obs_array.into_any();
         let col = |f: &dyn Fn(&Row) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
@@ -356,7 +364,13 @@ impl PyVecEnv {
         let (base, trial, seed) = self.seed_arrays(py);
         let final_part = if rows.iter().any(|r| r.ended) {
             let ended = flag(&|r| r.ended).into_pyarray(py).into_any();
-            let last = last_array.into_any();
+            let mut rows_out = Vec::new();
+            for (row, r) in self.last.chunks_exact(len).zip(&rows) {
+                if r.ended {
+                    rows_out.extend_from_slice(row);
+                }
+            }
+            let last = self.rows_to_array(py, rows_out)?.into_any();
             let ft: Vec<u64> = rows.iter().map(|r| r.final_trial).collect();
             let fs: Vec<u64> = rows.iter().map(|r| r.final_seed).collect();
             PyTuple::new(
