@@ -164,3 +164,32 @@ fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, scene: &Scene) -> Res
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use crossroads_sim::{ActionSet, Env, EnvConfig, RenderView, Scenario, SceneOptions};
+
+    use super::*;
+
+    #[test]
+    fn rgb_is_the_picture_row_by_row() {
+        let scenario = Arc::new(Scenario::builtin("left").expect("left"));
+        let mut env = Env::new(scenario, EnvConfig::for_actions(ActionSet::Ttg));
+        env.reset(3);
+        let scene = Scene::of(&env, &RenderView::default(), &SceneOptions::default());
+        let pixels = rgb(&scene).expect("pixels");
+        let (w, h) = scene.size;
+        assert_eq!(pixels.len(), 3 * w as usize * h as usize);
+        // Near the top right corner: background, left of the caption.
+        let at = |x: usize, y: usize| {
+            let i = 3 * (y * w as usize + x);
+            (pixels[i], pixels[i + 1], pixels[i + 2])
+        };
+        let bg = scene.background;
+        assert_eq!(at(w as usize - 2, 2), (bg.r, bg.g, bg.b));
+        let colours: std::collections::HashSet<_> = pixels.chunks_exact(3).collect();
+        assert!(colours.len() > 4, "{} colours", colours.len());
+    }
+}
