@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import crossroads
-from conftest import ALL_IDS
+from conftest import ALL_IDS, ROOT
 
 
 @pytest.mark.parametrize("env_id", ALL_IDS)
@@ -62,6 +62,8 @@ def test_config_overrides_and_errors() -> None:
         _, _, term, trunc, info = env.step(1)
         done, steps = term or trunc, steps + info["steps"]
     assert steps <= 30
+    from_file = crossroads.CrossroadsEnv(scenario=str(ROOT / "configs/scenarios/right.toml"))
+    assert from_file.core.scenario == "right"
     with pytest.raises(ValueError, match="unknown config keys"):
         crossroads.CrossroadsEnv(config={"scenaro": "left"})
     with pytest.raises(ValueError, match="scenario"):
