@@ -3,7 +3,8 @@
 # twice: in .venv with Gymnasium 1.x and Stable-Baselines3, and in
 # .venv-gym029 with Gymnasium 0.29.1 (the version CleanRL pins) and the
 # SB3 that supports it. The TTC parity test runs when a crossroads binary
-# is found (CROSSROADS_BIN, else target/release or target/debug).
+# is found (CROSSROADS_BIN, else the newer of target/release and
+# target/debug).
 #
 #   scripts/test-python.sh            # both
 #   scripts/test-python.sh --main     # .venv only

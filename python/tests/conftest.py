@@ -17,13 +17,15 @@ GYMNASIUM_1 = int(gym.__version__.split(".")[0]) >= 1
 
 
 def crossroads_bin() -> str | None:
-    """CROSSROADS_BIN, else the workspace's release or debug build."""
+    """CROSSROADS_BIN, else the newer of the workspace's release and debug
+    builds (`make test` builds the debug one; a release one may be older
+    than the simulator it is compared with)."""
     if os.environ.get("CROSSROADS_BIN"):
         return os.environ["CROSSROADS_BIN"]
-    for profile in ("release", "debug"):
-        candidate = ROOT / "target" / profile / "crossroads"
-        if candidate.exists():
-            return str(candidate)
+    builds = [ROOT / "target" / p / "crossroads" for p in ("release", "debug")]
+    builds = [b for b in builds if b.exists()]
+    if builds:
+        return str(max(builds, key=lambda b: b.stat().st_mtime))
     return shutil.which("crossroads")
 
 

@@ -1,6 +1,6 @@
 """A Python loop of the TTC rule gives the counts and the failing trials of
 `crossroads eval` with the same seed (needs the binary: CROSSROADS_BIN,
-else target/release or target/debug)."""
+else the newer of target/release and target/debug)."""
 
 from __future__ import annotations
 
