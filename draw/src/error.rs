@@ -33,6 +33,12 @@ pub enum DrawError {
         /// Why.
         message: String,
     },
+    /// plotters could not draw into pixels in memory ([`crate::rgb`]).
+    #[error("drawing pixels: {message}")]
+    Raster {
+        /// Why.
+        message: String,
+    },
     /// The finished picture could not be written.
     #[error("writing {}: {message}", path.display())]
     Write {
@@ -54,6 +60,12 @@ impl DrawError {
     pub(crate) fn draw(path: &Path, e: impl std::fmt::Display) -> Self {
         Self::Draw {
             path: path.to_owned(),
+            message: e.to_string(),
+        }
+    }
+
+    pub(crate) fn raster(e: impl std::fmt::Display) -> Self {
+        Self::Raster {
             message: e.to_string(),
         }
     }

@@ -6,7 +6,7 @@
 //! [`record_episode`] plays one trial of a policy and keeps a scene per
 //! simulation step ([`EpisodeScenes`]), and [`write_png`], [`write_svg`]
 //! and [`write_gif`] rasterise scenes with plotters, the same code for every
-//! format. [`plot`] draws [`Panel`]s of [`Series`] into a grid. Text uses an
+//! format and for the pixels of [`rgb`]. [`plot`] draws [`Panel`]s of [`Series`] into a grid. Text uses an
 //! embedded DejaVu Sans font, so no system fonts are needed. Every failure
 //! is a [`DrawError`] naming the file.
 
@@ -18,7 +18,7 @@ mod scene;
 pub use episode::{EpisodeScenes, EpisodeView, record_episode};
 pub use error::DrawError;
 pub use plot::{LOG_FLOOR, Panel, Series, chart, grid};
-pub use scene::{write_gif, write_png, write_svg};
+pub use scene::{rgb, write_gif, write_png, write_svg};
 
 use std::sync::Once;
 

@@ -1,6 +1,6 @@
 //! A [`Scene`] rasterised with plotters: background, shapes back to front,
-//! the caption and a legend of the car colours, the same code for PNG, SVG
-//! and each frame of a GIF.
+//! the caption and a legend of the car colours, the same code for PNG, SVG,
+//! each frame of a GIF and the pixels of [`rgb`].
 
 use std::path::Path;
 
@@ -24,6 +24,19 @@ pub fn write_svg(path: &Path, scene: &Scene) -> Result<(), DrawError> {
     let root = SVGBackend::new(path, scene.size).into_drawing_area();
     draw(&root, scene).map_err(|e| DrawError::draw(path, e))?;
     root.present().map_err(|e| DrawError::write(path, e))
+}
+
+/// Rasterises `scene` into RGB bytes, row by row from the top, three a
+/// pixel: the picture [`write_png`] writes (the Python face's `render`).
+pub fn rgb(scene: &Scene) -> Result<Vec<u8>, DrawError> {
+    let (w, h) = scene.size;
+    let mut pixels = vec![0u8; 3 * w as usize * h as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, scene.size).into_drawing_area();
+        draw(&root, scene).map_err(DrawError::raster)?;
+        root.present().map_err(DrawError::raster)?;
+    }
+    Ok(pixels)
 }
 
 /// Writes `scenes` to `path` as an animated GIF, one frame per 0.2 s
@@ -150,4 +163,33 @@ fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, scene: &Scene) -> Res
         x += 18 + width(label) + 14;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use crossroads_sim::{ActionSet, Env, EnvConfig, RenderView, Scenario, SceneOptions};
+
+    use super::*;
+
+    #[test]
+    fn rgb_is_the_picture_row_by_row() {
+        let scenario = Arc::new(Scenario::builtin("left").expect("left"));
+        let mut env = Env::new(scenario, EnvConfig::for_actions(ActionSet::Ttg));
+        env.reset(3);
+        let scene = Scene::of(&env, &RenderView::default(), &SceneOptions::default());
+        let pixels = rgb(&scene).expect("pixels");
+        let (w, h) = scene.size;
+        assert_eq!(pixels.len(), 3 * w as usize * h as usize);
+        // Near the top right corner: background, left of the caption.
+        let at = |x: usize, y: usize| {
+            let i = 3 * (y * w as usize + x);
+            (pixels[i], pixels[i + 1], pixels[i + 2])
+        };
+        let bg = scene.background;
+        assert_eq!(at(w as usize - 2, 2), (bg.r, bg.g, bg.b));
+        let colours: std::collections::HashSet<_> = pixels.chunks_exact(3).collect();
+        assert!(colours.len() > 4, "{} colours", colours.len());
+    }
 }
