@@ -3,9 +3,10 @@
 # type stubs, service stubs) into python/crossroads/service/_proto, or into
 # the folder given, with their imports of each other made package-relative
 # (protoc writes `from crossroads.v1 import schema_pb2`, which would name
-# the Python package crossroads). Needs grpcio-tools, at the version the
-# committed stubs were made with (see their headers and python/README or
-# docs/python-torch-and-services.md); PYTHON picks the interpreter.
+# the Python package crossroads). Needs grpcio-tools at the version the
+# committed stubs were made with (GRPC_GENERATED_VERSION in them), else the
+# output differs; PYTHON picks the interpreter (default: .venv's, else
+# python3).
 #
 #   scripts/gen-python-grpc.sh            # rewrite the committed stubs
 #   scripts/gen-python-grpc.sh /tmp/out   # write them elsewhere (the test)

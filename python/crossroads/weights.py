@@ -129,7 +129,9 @@ class NetworkSpec:
         if self.num_actions <= 0:
             raise ValueError(f"spec: num_actions must be positive, got {self.num_actions}")
         if any(h <= 0 or h > 1 << 16 for h in self.hidden):
-            raise ValueError(f"spec: hidden sizes must be between 1 and 65536, got {list(self.hidden)}")
+            raise ValueError(
+                f"spec: hidden sizes must be between 1 and 65536, got {list(self.hidden)}"
+            )
         if self.trunk not in ("mlp", "conv"):
             raise ValueError(f"spec: unknown trunk {self.trunk!r}; expected 'mlp' or 'conv'")
         if self.trunk == "conv" and len(self.hidden) < 2:
@@ -252,7 +254,8 @@ def read_weights(source: Source) -> WeightsFile:
         raise ValueError(f"format is {metadata.get('format')!r}, expected {FORMAT!r}")
     if metadata.get("format_version") != FORMAT_VERSION:
         raise ValueError(
-            f"format_version is {metadata.get('format_version')!r}; this package reads {FORMAT_VERSION}"
+            f"format_version is {metadata.get('format_version')!r}; "
+            f"this package reads {FORMAT_VERSION}"
         )
     try:
         version = int(metadata.get("weights_version", ""))
@@ -272,7 +275,9 @@ def read_weights(source: Source) -> WeightsFile:
     for name, shape in expected.items():
         got = tuple(tensors[name].shape)
         if got != shape:
-            raise ValueError(f"tensor {name!r} has shape {list(got)}, the spec's network has {list(shape)}")
+            raise ValueError(
+                f"tensor {name!r} has shape {list(got)}, the spec's network has {list(shape)}"
+            )
         if not np.isfinite(tensors[name]).all():
             raise ValueError(f"tensor {name!r} holds a NaN or infinite value")
     return WeightsFile(spec=spec, version=version, tensors=tensors, metadata=dict(metadata))

@@ -86,9 +86,15 @@ class Pki:
                 .add_extension(x509.BasicConstraints(ca=True, path_length=None), critical=True)
                 .add_extension(
                     x509.KeyUsage(
-                        digital_signature=False, content_commitment=False, key_encipherment=False,
-                        data_encipherment=False, key_agreement=False, key_cert_sign=True,
-                        crl_sign=True, encipher_only=False, decipher_only=False,
+                        digital_signature=False,
+                        content_commitment=False,
+                        key_encipherment=False,
+                        data_encipherment=False,
+                        key_agreement=False,
+                        key_cert_sign=True,
+                        crl_sign=True,
+                        encipher_only=False,
+                        decipher_only=False,
                     ),
                     critical=True,
                 )
@@ -141,8 +147,10 @@ class Pki:
         }
         args = [
             # With TLS on, the config insists on https:// endpoints.
-            "--set", "transport.replay_endpoint=https://127.0.0.1:50051",
-            "--set", "transport.learner_endpoint=https://127.0.0.1:50052",
+            "--set",
+            "transport.replay_endpoint=https://127.0.0.1:50051",
+            "--set",
+            "transport.learner_endpoint=https://127.0.0.1:50052",
         ]
         for k, v in sets.items():
             args += ["--set", f"{k}={v}"]
@@ -202,7 +210,7 @@ class Role:
                 self.process.wait(timeout)
             except subprocess.TimeoutExpired:
                 self.kill()
-                raise AssertionError(f"no exit {timeout}s after SIGTERM:\n{self.tail()}")
+                raise AssertionError(f"no exit {timeout}s after SIGTERM:\n{self.tail()}") from None
 
     def kill(self) -> None:
         if self.process.poll() is None:

@@ -67,7 +67,9 @@ def transitions(n: int, seed: int) -> TransitionBatch:
 @pytest.fixture(scope="module")
 def pki(tmp_path_factory):
     binary()
-    pytest.importorskip("cryptography", reason="the tests make their certificates with cryptography")
+    pytest.importorskip(
+        "cryptography", reason="the tests make their certificates with cryptography"
+    )
     return Pki(tmp_path_factory.mktemp("pki"))
 
 
@@ -77,11 +79,18 @@ def replay(pki, tmp_path_factory):
     role = Role(
         pki.server_args()
         + [
-            "--set", "telemetry.metrics_addr=127.0.0.1:0",
-            "--set", "replay.min_size_to_sample=1",
-            "--set", "replay.samples_per_insert=0",
-            "replay", "--listen", "127.0.0.1:0", "--no-shm",
-            "--snapshot-dir", str(dir / "snapshots"),
+            "--set",
+            "telemetry.metrics_addr=127.0.0.1:0",
+            "--set",
+            "replay.min_size_to_sample=1",
+            "--set",
+            "replay.samples_per_insert=0",
+            "replay",
+            "--listen",
+            "127.0.0.1:0",
+            "--no-shm",
+            "--snapshot-dir",
+            str(dir / "snapshots"),
         ],
         "replay server listening",
         dir / "replay.log",
@@ -96,15 +105,26 @@ class Learner:
     def __init__(self, pki: Pki, replay: Role, dir: Path) -> None:
         self.port = free_port()
         self.args = pki.server_args() + [
-            "--set", "telemetry.metrics_addr=127.0.0.1:0",
-            "--set", "learner.hidden=[16]",
-            "--set", "learner.batch_size=8",
-            "--set", "learner.publish_every=20",
-            "--set", "learner.checkpoint_every=1000000000",
-            "--set", "learner.checkpoint_keep=50",
-            "learner", "--listen", f"127.0.0.1:{self.port}",
-            "--replay", f"https://{replay.addr}", "--no-shm",
-            "--checkpoint-dir", str(dir / "checkpoints"),
+            "--set",
+            "telemetry.metrics_addr=127.0.0.1:0",
+            "--set",
+            "learner.hidden=[16]",
+            "--set",
+            "learner.batch_size=8",
+            "--set",
+            "learner.publish_every=20",
+            "--set",
+            "learner.checkpoint_every=1000000000",
+            "--set",
+            "learner.checkpoint_keep=50",
+            "learner",
+            "--listen",
+            f"127.0.0.1:{self.port}",
+            "--replay",
+            f"https://{replay.addr}",
+            "--no-shm",
+            "--checkpoint-dir",
+            str(dir / "checkpoints"),
         ]
         self.dir = dir
         self.starts = 0
@@ -192,7 +212,9 @@ def test_replay_info_insert_sample_and_priorities(replay_client, filled):
     assert info.rate_limiter.min_size_to_sample == 1 and info.rate_limiter.can_sample
 
     sample = replay_client.sample(6, beta=0.5, timeout=10)
-    assert len(sample.keys) == len(sample.weights) == len(sample.priorities) == len(sample.batch) == 6
+    assert (
+        len(sample.keys) == len(sample.weights) == len(sample.priorities) == len(sample.batch) == 6
+    )
     assert sample.keys.dtype == np.uint64
     assert np.all((sample.weights > 0) & (sample.weights <= 1))
     assert sample.batch.layout == TTG and sample.batch.num_actions == 5
@@ -200,9 +222,15 @@ def test_replay_info_insert_sample_and_priorities(replay_client, filled):
     inserted = {
         (s.tobytes(), n.tobytes(), int(a), float(r))
         for b in filled
-        for s, n, a, r in zip(b.states(), b.next_states(), b.actions, b.rewards)
+        for s, n, a, r in zip(b.states(), b.next_states(), b.actions, b.rewards, strict=True)
     }
-    for s, n, a, r in zip(sample.batch.states(), sample.batch.next_states(), sample.batch.actions, sample.batch.rewards):
+    for s, n, a, r in zip(
+        sample.batch.states(),
+        sample.batch.next_states(),
+        sample.batch.actions,
+        sample.batch.rewards,
+        strict=True,
+    ):
         assert (s.tobytes(), n.tobytes(), int(a), float(r)) in inserted
 
     update = replay_client.update_priorities(sample.keys, [3.0] * 6)
@@ -289,7 +317,9 @@ def test_checkpoints_save_list_pull_restore_delete(learner_client, tmp_path):
 def test_subscription_yields_new_versions_and_resumes_after_the_stream_is_cut(pki, learner, filled):
     relay = Relay(learner.addr)
     try:
-        with LearnerClient(f"https://{relay.addr}", ca_file=pki.ca, server_name="localhost") as client:
+        with LearnerClient(
+            f"https://{relay.addr}", ca_file=pki.ca, server_name="localhost"
+        ) as client:
             stream = client.subscribe_weights(give_up_after=60)
             before = take(stream, lambda got: len(got) >= 2)
             assert relay.accepted == 1

@@ -29,7 +29,11 @@ def safetensors_bytes(tensors: dict, metadata: dict | None) -> bytes:
     data = b""
     for name, array in sorted(tensors.items()):
         raw = np.ascontiguousarray(array, dtype="<f4").tobytes()
-        header[name] = {"dtype": "F32", "shape": list(array.shape), "data_offsets": [len(data), len(data) + len(raw)]}
+        header[name] = {
+            "dtype": "F32",
+            "shape": list(array.shape),
+            "data_offsets": [len(data), len(data) + len(raw)],
+        }
         data += raw
     text = json.dumps(header).encode()
     return struct.pack("<Q", len(text)) + text + data
@@ -127,7 +131,9 @@ def test_committed_network_computes_the_architecture():
     np.testing.assert_allclose(one.numpy(), q[0], atol=1e-6)
 
 
-@pytest.mark.parametrize("spec", [SMALL_MLP, SMALL_CONV, NetworkSpec(SMALL_MLP.observation, "ttg", 5, "mlp", ())])
+@pytest.mark.parametrize(
+    "spec", [SMALL_MLP, SMALL_CONV, NetworkSpec(SMALL_MLP.observation, "ttg", 5, "mlp", ())]
+)
 def test_a_written_file_loads_from_bytes_and_computes_the_architecture(spec):
     tensors = random_tensors(spec)
     data = safetensors_bytes(tensors, metadata(spec, version=42))
@@ -169,8 +175,14 @@ def test_other_formats_and_bad_specs_are_refused():
     refused(safetensors_bytes(tensors, {**meta, "format": "other"}), "format is 'other'")
     refused(safetensors_bytes(tensors, {**meta, "weights_version": "x"}), "weights_version")
     spec = json.loads(meta["spec"])
-    refused(safetensors_bytes(tensors, {**meta, "spec": json.dumps({**spec, "trunk": "lstm"})}), "unknown trunk 'lstm'")
-    refused(safetensors_bytes(tensors, {**meta, "spec": json.dumps({**spec, "hidden": [0]})}), "hidden sizes")
+    refused(
+        safetensors_bytes(tensors, {**meta, "spec": json.dumps({**spec, "trunk": "lstm"})}),
+        "unknown trunk 'lstm'",
+    )
+    refused(
+        safetensors_bytes(tensors, {**meta, "spec": json.dumps({**spec, "hidden": [0]})}),
+        "hidden sizes",
+    )
     del spec["action_set"]
     refused(safetensors_bytes(tensors, {**meta, "spec": json.dumps(spec)}), "lacks 'action_set'")
     refused(safetensors_bytes(tensors, {**meta, "spec": "{"}), "not a network spec")

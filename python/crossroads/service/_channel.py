@@ -46,7 +46,9 @@ def _token(token: Optional[str], token_file: Optional[PathLike]) -> Optional[str
     if not text:
         raise ValueError(f"{origin} is empty")
     if not all(33 <= ord(c) <= 126 for c in text):
-        raise ValueError(f"{origin} must be printable ASCII without spaces (it is sent in an HTTP header)")
+        raise ValueError(
+            f"{origin} must be printable ASCII without spaces (it is sent in an HTTP header)"
+        )
     return text
 
 
@@ -128,10 +130,16 @@ class Connection:
     def has_token(self) -> bool:
         return bool(self._metadata)
 
-    def call(self, method: str, rpc: Callable[..., T], request, timeout: Optional[float] = None) -> T:
+    def call(
+        self, method: str, rpc: Callable[..., T], request, timeout: Optional[float] = None
+    ) -> T:
         """A unary call, its failure as a typed error."""
         try:
-            return rpc(request, timeout=self.timeout if timeout is None else timeout, metadata=self._metadata)
+            return rpc(
+                request,
+                timeout=self.timeout if timeout is None else timeout,
+                metadata=self._metadata,
+            )
         except grpc.RpcError as e:
             raise from_rpc_error(e, method) from None
 

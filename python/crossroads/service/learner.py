@@ -61,7 +61,9 @@ class LearnerClient(Connection):
 
     def latest_weights(self) -> Weights:
         """The latest published weights; ``NotFound`` before the first."""
-        w = self.call("GetLatestWeights", self._stub.GetLatestWeights, learner_pb2.GetLatestWeightsRequest())
+        w = self.call(
+            "GetLatestWeights", self._stub.GetLatestWeights, learner_pb2.GetLatestWeightsRequest()
+        )
         return _weights(w)
 
     def subscribe_weights(
@@ -119,13 +121,17 @@ class LearnerClient(Connection):
 
     def list_checkpoints(self) -> List[CheckpointInfo]:
         """Every stored checkpoint, newest first."""
-        r = self.call("ListCheckpoints", self._stub.ListCheckpoints, learner_pb2.ListCheckpointsRequest())
+        r = self.call(
+            "ListCheckpoints", self._stub.ListCheckpoints, learner_pb2.ListCheckpointsRequest()
+        )
         return [_checkpoint(c) for c in r.checkpoints]
 
     def save_checkpoint(self) -> CheckpointInfo:
         """Writes a checkpoint now and returns it (needs the token)."""
         return _checkpoint(
-            self.call("SaveCheckpoint", self._stub.SaveCheckpoint, learner_pb2.SaveCheckpointRequest())
+            self.call(
+                "SaveCheckpoint", self._stub.SaveCheckpoint, learner_pb2.SaveCheckpointRequest()
+            )
         )
 
     def restore_checkpoint(self, id: str) -> RestoredCheckpoint:
@@ -134,13 +140,21 @@ class LearnerClient(Connection):
         new, higher version. Needs the token; ``NotFound`` for an unknown
         id."""
         r = self.call(
-            "RestoreCheckpoint", self._stub.RestoreCheckpoint, learner_pb2.RestoreCheckpointRequest(id=id)
+            "RestoreCheckpoint",
+            self._stub.RestoreCheckpoint,
+            learner_pb2.RestoreCheckpointRequest(id=id),
         )
-        return RestoredCheckpoint(checkpoint=_checkpoint(r.checkpoint), weights_version=r.weights_version)
+        return RestoredCheckpoint(
+            checkpoint=_checkpoint(r.checkpoint), weights_version=r.weights_version
+        )
 
     def delete_checkpoint(self, id: str) -> None:
         """Removes checkpoint ``id`` (needs the token)."""
-        self.call("DeleteCheckpoint", self._stub.DeleteCheckpoint, learner_pb2.DeleteCheckpointRequest(id=id))
+        self.call(
+            "DeleteCheckpoint",
+            self._stub.DeleteCheckpoint,
+            learner_pb2.DeleteCheckpointRequest(id=id),
+        )
 
     def report_evaluation(self, weights_version: int, metrics: Dict[str, float]) -> None:
         """Reports the greedy evaluation of a weights version (metric name
@@ -151,14 +165,17 @@ class LearnerClient(Connection):
             learner_pb2.ReportEvaluationRequest(weights_version=weights_version, metrics=metrics),
         )
 
-    def pull_checkpoint(self, id: str, out: "os.PathLike[str] | str") -> Tuple[CheckpointInfo, Path]:
+    def pull_checkpoint(
+        self, id: str, out: "os.PathLike[str] | str", timeout: float = 600.0
+    ) -> Tuple[CheckpointInfo, Path]:
         """Downloads checkpoint ``id`` into ``out/<id>/`` (written under a
         temporary name, then renamed into place); returns its description
         and folder. File names from the learner are checked, so nothing is
-        written outside that folder."""
+        written outside that folder. ``timeout``: seconds the whole
+        download may take."""
         out = Path(out)
         call = self.stream(
-            self._stub.GetCheckpoint, learner_pb2.GetCheckpointRequest(id=id), timeout=self.timeout
+            self._stub.GetCheckpoint, learner_pb2.GetCheckpointRequest(id=id), timeout=timeout
         )
         tmp: Optional[Path] = None
         try:
@@ -166,7 +183,11 @@ class LearnerClient(Connection):
                 chunks = iter(call)
                 first = next(chunks, None)
                 if first is None or not first.HasField("info"):
-                    raise ServerError("the checkpoint stream did not start with its info", "INTERNAL", "GetCheckpoint")
+                    raise ServerError(
+                        "the checkpoint stream did not start with its info",
+                        "INTERNAL",
+                        "GetCheckpoint",
+                    )
                 info = _checkpoint(first.info)
                 _check_name(info.id, "checkpoint id")
                 out.mkdir(parents=True, exist_ok=True)
@@ -179,16 +200,28 @@ class LearnerClient(Connection):
                     name = chunk.file
                     _check_name(name, "file name")
                     if name not in info.files:
-                        raise ServerError(f"unexpected file {name!r} in checkpoint {info.id}", "INTERNAL", "GetCheckpoint")
+                        raise ServerError(
+                            f"unexpected file {name!r} in checkpoint {info.id}",
+                            "INTERNAL",
+                            "GetCheckpoint",
+                        )
                     if done.get(name) or chunk.offset != written.get(name, 0):
-                        raise ServerError(f"chunk of {name} at offset {chunk.offset} out of order", "INTERNAL", "GetCheckpoint")
+                        raise ServerError(
+                            f"chunk of {name} at offset {chunk.offset} out of order",
+                            "INTERNAL",
+                            "GetCheckpoint",
+                        )
                     with open(tmp / name, "ab") as f:
                         f.write(chunk.data)
                     written[name] = chunk.offset + len(chunk.data)
                     done[name] = chunk.end_of_file
                 incomplete = [n for n in info.files if not done.get(n)]
                 if incomplete:
-                    raise ServerError(f"the stream ended before {incomplete} were complete", "INTERNAL", "GetCheckpoint")
+                    raise ServerError(
+                        f"the stream ended before {incomplete} were complete",
+                        "INTERNAL",
+                        "GetCheckpoint",
+                    )
             dest = out / info.id
             if dest.exists():
                 shutil.rmtree(dest)
@@ -205,14 +238,17 @@ def _check_name(name: str, what: str) -> None:
     """A plain name: no folder, not hidden, nothing that leaves the
     folder."""
     if not name or name.startswith(".") or "/" in name or "\\" in name or "\0" in name:
-        raise InvalidArgument(f"invalid {what} {name!r} from the learner", "INVALID_ARGUMENT", "GetCheckpoint")
+        raise InvalidArgument(
+            f"invalid {what} {name!r} from the learner", "INVALID_ARGUMENT", "GetCheckpoint"
+        )
 
 
 def _spec(s: schema_pb2.NetworkSpec) -> NetworkSpec:
     o = s.observation
     if len(o.shape) != 3:
         raise ServerError(
-            f"network spec: observation shape {list(o.shape)} is not [channels, rows, cols]", "INTERNAL"
+            f"network spec: observation shape {list(o.shape)} is not [channels, rows, cols]",
+            "INTERNAL",
         )
     extra = o.extra_features or s.extra_features
     return NetworkSpec(

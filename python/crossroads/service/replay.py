@@ -78,7 +78,9 @@ class ReplayClient(Connection):
         """Stores one batch; returns once it is in the table."""
         return self.insert_many([batch], encoding=encoding)[0]
 
-    def insert_many(self, batches: Iterable[TransitionBatch], *, encoding: str = "sparse") -> List[InsertAck]:
+    def insert_many(
+        self, batches: Iterable[TransitionBatch], *, encoding: str = "sparse"
+    ) -> List[InsertAck]:
         """Streams batches on one call; returns each one's acknowledgement,
         in order. Observations travel ``sparse`` (only non-zero cells; a
         grid is mostly empty) or ``dense``. A batch the server rejects
@@ -86,7 +88,9 @@ class ReplayClient(Connection):
         oversized), naming the field; batches acknowledged before it are
         stored."""
         requests = [
-            replay_pb2.InsertRequest(table=self.table, batch_id=i, batch=_batch_to_wire(b, encoding))
+            replay_pb2.InsertRequest(
+                table=self.table, batch_id=i, batch=_batch_to_wire(b, encoding)
+            )
             for i, b in enumerate(batches)
         ]
         if not requests:
@@ -97,12 +101,18 @@ class ReplayClient(Connection):
             with translate("Insert"):
                 for ack in call:
                     if ack.batch_id != len(acks):
-                        raise ServerError(f"acknowledgement of batch {ack.batch_id}, expected {len(acks)}", "INTERNAL", "Insert")
+                        raise ServerError(
+                            f"acknowledgement of batch {ack.batch_id}, expected {len(acks)}",
+                            "INTERNAL",
+                            "Insert",
+                        )
                     acks.append(InsertAck(inserted=ack.inserted, table_size=ack.table_size))
         finally:
             call.cancel()
         if len(acks) != len(requests):
-            raise ServerError(f"{len(acks)} of {len(requests)} batches acknowledged", "INTERNAL", "Insert")
+            raise ServerError(
+                f"{len(acks)} of {len(requests)} batches acknowledged", "INTERNAL", "Insert"
+            )
         return acks
 
     def sample(self, batch_size: int, beta: float = 0.4, timeout: Optional[float] = None) -> Sample:
@@ -116,13 +126,19 @@ class ReplayClient(Connection):
         r = self.call(
             "Sample",
             self._stub.Sample,
-            replay_pb2.SampleRequest(table=self.table, batch_size=batch_size, beta=beta, timeout_ms=timeout_ms),
+            replay_pb2.SampleRequest(
+                table=self.table, batch_size=batch_size, beta=beta, timeout_ms=timeout_ms
+            ),
             timeout=deadline,
         )
         batch = _batch_from_wire(r.batch)
         n = len(batch)
         if not (len(r.keys) == len(r.weights) == len(r.priorities) == n):
-            raise ServerError(f"{len(r.keys)} keys, {len(r.weights)} weights for {n} transitions", "INTERNAL", "Sample")
+            raise ServerError(
+                f"{len(r.keys)} keys, {len(r.weights)} weights for {n} transitions",
+                "INTERNAL",
+                "Sample",
+            )
         return Sample(
             keys=np.asarray(r.keys, dtype=np.uint64),
             weights=np.asarray(r.weights, dtype=np.float32),
@@ -148,7 +164,9 @@ class ReplayClient(Connection):
         """Writes a snapshot now; ``FailedPrecondition`` when the server
         has no snapshot directory."""
         r = self.call("Snapshot", self._stub.Snapshot, replay_pb2.SnapshotRequest())
-        return SnapshotInfo(path=r.path, items=r.items, bytes=r.bytes, duration_seconds=r.duration_seconds)
+        return SnapshotInfo(
+            path=r.path, items=r.items, bytes=r.bytes, duration_seconds=r.duration_seconds
+        )
 
     def join_actor(self, name: str) -> JoinedActor:
         """An actor index for ``name`` (the same name gets the same one)."""
@@ -158,7 +176,9 @@ class ReplayClient(Connection):
 
 def _layout_to_wire(layout: ObservationLayout) -> schema_pb2.ObservationSpec:
     return schema_pb2.ObservationSpec(
-        kind=layout.kind, shape=[layout.channels, layout.rows, layout.cols], extra_features=layout.extra
+        kind=layout.kind,
+        shape=[layout.channels, layout.rows, layout.cols],
+        extra_features=layout.extra,
     )
 
 
@@ -166,7 +186,8 @@ def _batch_to_wire(b: TransitionBatch, encoding: str) -> schema_pb2.TransitionBa
     obs = np.ascontiguousarray(b.observations, dtype=np.float32)
     if obs.ndim != 2 or obs.shape[1] != b.layout.size:
         raise ValueError(
-            f"observations must be [n, {b.layout.size}] for layout {b.layout}, got {list(obs.shape)}"
+            f"observations must be [n, {b.layout.size}] for layout {b.layout}, "
+            f"got {list(obs.shape)}"
         )
     offsets: List[int] = []
     parts: List[bytes] = []
@@ -197,7 +218,9 @@ def _batch_to_wire(b: TransitionBatch, encoding: str) -> schema_pb2.TransitionBa
         rewards=np.asarray(b.rewards, dtype=np.float32).tolist(),
         discounts=np.asarray(b.discounts, dtype=np.float32).tolist(),
         priorities=np.asarray(b.priorities, dtype=np.float32).tolist(),
-        observations=schema_pb2.ObservationPool(encoding=wire_encoding, offsets=offsets, data=b"".join(parts)),
+        observations=schema_pb2.ObservationPool(
+            encoding=wire_encoding, offsets=offsets, data=b"".join(parts)
+        ),
         observation_index=np.asarray(b.observation_index, dtype=np.uint32).tolist(),
         next_observation_index=np.asarray(b.next_observation_index, dtype=np.uint32).tolist(),
     )
@@ -206,7 +229,11 @@ def _batch_to_wire(b: TransitionBatch, encoding: str) -> schema_pb2.TransitionBa
 def _batch_from_wire(b: schema_pb2.TransitionBatch) -> TransitionBatch:
     shape = list(b.spec.shape)
     if len(shape) != 3:
-        raise ServerError(f"sampled batch: observation shape {shape} is not [channels, rows, cols]", "INTERNAL", "Sample")
+        raise ServerError(
+            f"sampled batch: observation shape {shape} is not [channels, rows, cols]",
+            "INTERNAL",
+            "Sample",
+        )
     layout = ObservationLayout(b.spec.kind, shape[0], shape[1], shape[2], b.spec.extra_features)
     pool = b.observations
     offsets = list(pool.offsets) + [len(pool.data)]
@@ -220,7 +247,9 @@ def _batch_from_wire(b: schema_pb2.TransitionBatch) -> TransitionBatch:
             pairs = np.frombuffer(chunk, dtype=[("i", "<u4"), ("v", "<f4")])
             obs[i, pairs["i"]] = pairs["v"]
         else:
-            raise ServerError(f"sampled batch: unknown observation encoding {pool.encoding}", "INTERNAL", "Sample")
+            raise ServerError(
+                f"sampled batch: unknown observation encoding {pool.encoding}", "INTERNAL", "Sample"
+            )
     return TransitionBatch(
         layout=layout,
         num_actions=b.num_actions,
