@@ -175,10 +175,11 @@ class Role:
 
     def _read(self) -> None:
         assert self.process.stderr is not None
-        for raw in self.process.stderr:
-            self._file.write(raw)
-            self._file.flush()
-            self._lines.put(raw.decode("utf-8", "replace"))
+        with self._file:
+            for raw in self.process.stderr:
+                self._file.write(raw)
+                self._file.flush()
+                self._lines.put(raw.decode("utf-8", "replace"))
         self._lines.put(None)
 
     def _wait_for(self, needle: str, timeout: float) -> str:

@@ -400,7 +400,7 @@ def test_generated_stubs_are_up_to_date(tmp_path):
         import grpc_tools
         from importlib.metadata import version
     except ImportError:
-        skip_or_fail("grpcio-tools is not installed: pip install './python[dev]'")
+        skip_or_fail("grpcio-tools is not installed: pip install grpcio-tools==1.85.4")
     committed = (PROTO_DIR / "learner_pb2_grpc.py").read_text()
     wanted = committed.split("GRPC_GENERATED_VERSION = '", 1)[1].split("'", 1)[0]
     have = version("grpcio-tools")
