@@ -32,7 +32,10 @@ run: build
 deploydeps:
 	@scripts/setup-deploy.sh
 
-# Every test: the slow trainings (CROSSROADS_SLOW_TESTS=1) and those that
+# Every test: the Python package's (scripts/test-python.sh, after the
+# test build, whose crossroads binary its parity and service tests run,
+# and before the Rust tests that need the package in .venv); the slow
+# trainings (CROSSROADS_SLOW_TESTS=1) and those that
 # need Python, Docker, SUMO or (as root) a tmpfs mount and network
 # namespaces, all ignored by plain `cargo test` with the reason, and here
 # failing when their tool is missing (CROSSROADS_REQUIRE_*=1); then each
@@ -40,6 +43,8 @@ deploydeps:
 FUZZ_SMOKE_SECONDS ?= 20
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
+	$(CARGO) test --workspace --all-targets --no-run
+	CROSSROADS_REQUIRE_PYTHON=1 scripts/test-python.sh
 	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 \
 	CROSSROADS_REQUIRE_MOUNT=$$([ "$$(id -u)" = 0 ] && echo 1) \
 	$(CARGO) test --workspace --all-targets --no-fail-fast -- --include-ignored

@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Builds the Python package (python/, one abi3 wheel) and runs its tests
-# twice: in .venv with Gymnasium 1.x and Stable-Baselines3, and in
-# .venv-gym029 with Gymnasium 0.29.1 (the version CleanRL pins) and the
-# SB3 that supports it. The TTC parity test runs when a crossroads binary
-# is found (CROSSROADS_BIN, else the newer of target/release and
-# target/debug).
+# twice: in .venv with Gymnasium 1.x, Stable-Baselines3 and the torch,
+# grpc and test extras (every file of python/tests), and in .venv-gym029
+# with Gymnasium 0.29.1 (the version CleanRL pins) and the SB3 that
+# supports it (the environments' files). .venv-gym029 borrows torch from
+# .venv (a .pth file) instead of a second copy of several GB. The parity
+# and service tests run when a crossroads binary is found
+# (CROSSROADS_BIN, else target/release or target/debug).
 #
 #   scripts/test-python.sh            # both
 #   scripts/test-python.sh --main     # .venv only
@@ -48,20 +50,35 @@ else
 fi
 wheel="$(ls "$wheels"/crossroads-*.whl)"
 
-# run VENV REQUIREMENTS...: installs the wheel and REQUIREMENTS, runs pytest.
+cache="${CROSSROADS_WHEEL_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/crossroads/wheels}"
+
+# run VENV TESTS REQUIREMENTS...: installs the wheel and REQUIREMENTS, runs
+# pytest on TESTS (files or folders, space-separated).
 run() {
-    local venv="$1"
-    shift
+    local venv="$1" tests="$2"
+    shift 2
     pip_in "$venv" --force-reinstall --no-deps "$wheel"
-    pip_in "$venv" "$wheel" pytest "$@"
+    pip_in "$venv" --find-links "$cache" "$@"
     say "pytest in $venv ($("$venv/bin/python3" -c 'import gymnasium; print("gymnasium", gymnasium.__version__)'))"
-    "$venv/bin/python3" -m pytest -q python/tests
+    # shellcheck disable=SC2086
+    "$venv/bin/python3" -m pytest -q $tests
 }
 
-run .venv "gymnasium>=1.1" "stable-baselines3>=2.4"
+# torch as `make bench-learner` installs it (the libtorch wheel's version,
+# from the cache setup-libtorch.sh fills).
+run .venv python/tests "$wheel[sb3,torch,grpc,test]" -r scripts/requirements-bench.txt \
+    "gymnasium>=1.1" "stable-baselines3>=2.4"
 $only_main && exit 0
 
 if [[ ! -x .venv-gym029/bin/python3 ]]; then
     python3 -m venv .venv-gym029 || die "the 0.29.1 check needs python3 -m venv"
 fi
-run .venv-gym029 "gymnasium==0.29.1" "numpy<2" "stable-baselines3>=2.3,<2.4"
+# .venv's packages after .venv-gym029's own: torch for SB3 without a copy.
+own="$(.venv-gym029/bin/python3 -c 'import sysconfig; print(sysconfig.get_path("purelib"))')"
+if [[ -d .venv/site ]]; then
+    echo "$repo/.venv/site" > "$own/crossroads-borrow-venv.pth"
+else
+    .venv/bin/python3 -c 'import sysconfig; print(sysconfig.get_path("purelib"))' > "$own/crossroads-borrow-venv.pth"
+fi
+envs="$(ls python/tests/test_*.py | grep -v -e test_torch -e test_service | xargs)"
+run .venv-gym029 "$envs" "$wheel" pytest "gymnasium==0.29.1" "numpy<2" "stable-baselines3>=2.3,<2.4"
