@@ -32,9 +32,10 @@ run: build
 deploydeps:
 	@scripts/setup-deploy.sh
 
-# Every test: the Python package's (scripts/test-python.sh, after the
-# test build, whose crossroads binary its parity and service tests run,
-# and before the Rust tests that need the package in .venv); the slow
+# Every test: the Python package's (scripts/test-python.sh, its SB3
+# training included, after the test build, whose crossroads binary its
+# parity and service tests run, and before the Rust tests that need the
+# package in .venv); the slow
 # trainings (CROSSROADS_SLOW_TESTS=1) and those that
 # need Python, Docker, SUMO or (as root) a tmpfs mount and network
 # namespaces, all ignored by plain `cargo test` with the reason, and here
@@ -44,7 +45,7 @@ FUZZ_SMOKE_SECONDS ?= 20
 test: setup pydeps deploydeps
 	$(CARGO) fmt --all -- --check
 	$(CARGO) test --workspace --all-targets --no-run
-	CROSSROADS_REQUIRE_PYTHON=1 scripts/test-python.sh
+	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 scripts/test-python.sh
 	CROSSROADS_SLOW_TESTS=1 CROSSROADS_REQUIRE_PYTHON=1 CROSSROADS_REQUIRE_DOCKER=1 CROSSROADS_REQUIRE_SUMO=1 \
 	CROSSROADS_REQUIRE_MOUNT=$$([ "$$(id -u)" = 0 ] && echo 1) \
 	$(CARGO) test --workspace --all-targets --no-fail-fast -- --include-ignored
