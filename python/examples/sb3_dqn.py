@@ -6,10 +6,10 @@ it, a random policy and go-at-once on held-out episodes.
 
 Training steps ``N_ENVS`` environments of ``crossroads.sb3.CrossroadsVecEnv``
 seeded ``seed`` to ``seed + N_ENVS - 1`` (more training per second than
-one ``gym.make`` environment with an update per decision); the evaluation plays episodes
-0 to n - 1 after ``reset(seed=EVAL_SEED)``, which no training seed
-reaches, so they are trials 0 to n - 1 of ``crossroads eval --seed
-1000000000``. Prints one line per policy (success, collision and timeout
+one ``gym.make`` environment with an update per decision); the
+evaluation plays episodes 0 to n - 1 after ``reset(seed=EVAL_SEED)``,
+which no training seed reaches, so they are trials 0 to n - 1 of
+``crossroads eval --seed 1000000000``. Prints one line per policy (success, collision and timeout
 rates, mean time of the successful episodes) and saves the model to
 ``<out>/model.zip``; ``--json`` also writes the results to a file.
 Needs the ``sb3`` extra.
