@@ -9,8 +9,8 @@ use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::episode::{Bounds, Episode, Settings, ends, outcome_name};
-use crate::{parse_actions, parse_observation, value_error};
+use crate::episode::{Bounds, Episode, ends, outcome_name};
+use crate::{environment, value_error};
 
 /// One environment: `reset(seed)` starts trial 0 of `crossroads eval
 /// --seed seed`, `reset(None)` the next trial; `step(action)` returns
@@ -60,18 +60,15 @@ impl PyEnv {
         collision_reward: Option<f64>,
         overrides: Option<String>,
     ) -> PyResult<Self> {
-        let settings = Settings {
-            scenario: scenario.to_owned(),
-            actions: parse_actions(actions)?,
+        let (scenario, config, bounds) = environment(
+            scenario,
+            actions,
             drivers,
-            observation: observation.map(parse_observation).transpose()?,
+            observation,
             gamma,
             collision_reward,
             overrides,
-        };
-        let (scenario, config) = settings.build().map_err(value_error)?;
-        let spec = config.observation.spec(scenario.occlusion_channels());
-        let bounds = Arc::new(Bounds::of(&scenario, &spec));
+        )?;
         let uint64 = py.import("numpy")?.getattr("uint64")?.unbind();
         Ok(Self {
             episode: Episode::new(&scenario, config, Arc::clone(&bounds)),

@@ -15,9 +15,13 @@ mod env;
 mod episode;
 mod vec_env;
 
-use crossroads_sim::{ActionSet, ObsKind};
+use std::sync::Arc;
+
+use crossroads_sim::{ActionSet, EnvConfig, ObsKind, Scenario};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+use crate::episode::{Bounds, Settings};
 
 /// A Rust error as Python's `ValueError`, with its message.
 pub(crate) fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -38,11 +42,37 @@ pub(crate) fn parse_observation(name: &str) -> PyResult<ObsKind> {
     })
 }
 
+/// The scenario, its environment settings and the observation's bounds
+/// that the keyword arguments `Env` and `VecEnv` share describe.
+pub(crate) fn environment(
+    scenario: &str,
+    actions: &str,
+    drivers: Option<String>,
+    observation: Option<&str>,
+    gamma: f64,
+    collision_reward: Option<f64>,
+    overrides: Option<String>,
+) -> PyResult<(Arc<Scenario>, EnvConfig, Arc<Bounds>)> {
+    let settings = Settings {
+        scenario: scenario.to_owned(),
+        actions: parse_actions(actions)?,
+        drivers,
+        observation: observation.map(parse_observation).transpose()?,
+        gamma,
+        collision_reward,
+        overrides,
+    };
+    let (scenario, config) = settings.build().map_err(value_error)?;
+    let spec = config.observation.spec(scenario.occlusion_channels());
+    let bounds = Arc::new(Bounds::of(&scenario, &spec));
+    Ok((scenario, config, bounds))
+}
+
 /// Names of the built-in scenarios (the occlusion family also takes
 /// `occluded-<30|60|90>[-<left|right|both>]`).
 #[pyfunction]
 fn builtin_scenarios() -> Vec<&'static str> {
-    crossroads_sim::Scenario::builtin_names()
+    Scenario::builtin_names()
 }
 
 /// Seed of trial `trial` of `crossroads eval --seed base`.
@@ -58,8 +88,7 @@ fn episode_seed(base: u64, trial: u64) -> u64 {
 #[pyfunction]
 #[pyo3(signature = (scenario="right", seconds=1.0))]
 fn bench_simulator(py: Python<'_>, scenario: &str, seconds: f64) -> PyResult<f64> {
-    let scenario =
-        std::sync::Arc::new(crossroads_sim::Scenario::load(scenario).map_err(value_error)?);
+    let scenario = Arc::new(Scenario::load(scenario).map_err(value_error)?);
     let min = std::time::Duration::from_secs_f64(seconds.max(0.01));
     py.detach(|| crossroads_sim::bench_scenario(&scenario, min))
         .map(|f| f.decisions_per_s)

@@ -17,8 +17,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 use rayon::prelude::*;
 
-use crate::episode::{Bounds, Episode, Settings, ends, outcome_code};
-use crate::{parse_actions, parse_observation, value_error};
+use crate::episode::{Episode, ends, outcome_code};
+use crate::{environment, value_error};
 
 /// When a finished environment starts its next episode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -210,18 +210,15 @@ impl PyVecEnv {
                 )));
             }
         };
-        let settings = Settings {
-            scenario: scenario.to_owned(),
-            actions: parse_actions(actions)?,
+        let (scenario, config, bounds) = environment(
+            scenario,
+            actions,
             drivers,
-            observation: observation.map(parse_observation).transpose()?,
+            observation,
             gamma,
             collision_reward,
             overrides,
-        };
-        let (scenario, config) = settings.build().map_err(value_error)?;
-        let spec = config.observation.spec(scenario.occlusion_channels());
-        let bounds = Arc::new(Bounds::of(&scenario, &spec));
+        )?;
         let pool = match threads {
             1 => None,
             n => Some(
@@ -238,7 +235,7 @@ impl PyVecEnv {
                     pending_reset: false,
                 })
                 .collect(),
-            obs_len: spec.len(),
+            obs_len: bounds.low.len(),
             gamma,
             mode,
             last: Vec::new(),

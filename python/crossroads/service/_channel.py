@@ -11,6 +11,8 @@ import grpc
 
 from .errors import CrossroadsError, from_rpc_error
 
+_C = TypeVar("_C", bound="Connection")
+
 T = TypeVar("T")
 
 #: The environment variable read for the token when none is given (the
@@ -150,6 +152,12 @@ class Connection:
 
     def close(self) -> None:
         self.channel.close()
+
+    def __enter__(self: _C) -> _C:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 class translate:

@@ -38,12 +38,6 @@ class LearnerClient(Connection):
         super().__init__(endpoint, **kwargs)
         self._stub = learner_pb2_grpc.LearnerStub(self.channel)
 
-    def __enter__(self) -> "LearnerClient":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     def status(self) -> LearnerStatus:
         """Where training stands."""
         s = self.call("Status", self._stub.Status, learner_pb2.StatusRequest())

@@ -42,12 +42,6 @@ class ReplayClient(Connection):
         self.table = table
         self._stub = replay_pb2_grpc.ReplayStub(self.channel)
 
-    def __enter__(self) -> "ReplayClient":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     def info(self) -> TableInfo:
         """Size, capacity, counters and rate-limiter state of the table."""
         t = self.call("Info", self._stub.Info, replay_pb2.InfoRequest(table=self.table))
