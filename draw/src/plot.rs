@@ -72,22 +72,25 @@ pub fn grid(
     let rows = panels.len().div_ceil(cols).max(1);
     let head = if title.is_some() { 40 } else { 0 };
     let size = (800 * cols as u32, 560 * rows as u32 + head);
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    let draw = |e: &dyn std::fmt::Display| DrawError::draw(path, e);
-    root.fill(&WHITE).map_err(|e| draw(&e))?;
-    let body = match title {
-        Some(t) => root.titled(t, (FONT, 28)).map_err(|e| draw(&e))?,
-        None => root.clone(),
-    };
-    for (area, panel) in body.split_evenly((rows, cols)).iter().zip(panels) {
-        draw_panel(area, panel).map_err(|message| DrawError::Panel {
-            panel: panel.title.clone(),
-            path: path.to_owned(),
-            message,
-        })?;
+    let mut pixels = vec![0u8; 3 * size.0 as usize * size.1 as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
+        let draw = |e: &dyn std::fmt::Display| DrawError::draw(path, e);
+        root.fill(&WHITE).map_err(|e| draw(&e))?;
+        let body = match title {
+            Some(t) => root.titled(t, (FONT, 28)).map_err(|e| draw(&e))?,
+            None => root.clone(),
+        };
+        for (area, panel) in body.split_evenly((rows, cols)).iter().zip(panels) {
+            draw_panel(area, panel).map_err(|message| DrawError::Panel {
+                panel: panel.title.clone(),
+                path: path.to_owned(),
+                message,
+            })?;
+        }
+        root.present().map_err(|e| draw(&e))?;
     }
-    root.present().map_err(|e| DrawError::write(path, e))?;
-    Ok(())
+    crate::encode_png(path, size, &pixels)
 }
 
 fn draw_panel(
