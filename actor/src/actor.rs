@@ -16,7 +16,7 @@ use crossroads_common::Shutdown;
 use crossroads_common::retry::Backoff;
 use crossroads_config::{ActorConfig, SimConfig, TransportConfig};
 use crossroads_sim::{
-    ActionSet, EnvConfig, EpisodeEnd, Policy, PolicyRng, PolicySpec, Scenario, SensedCar,
+    ActionSet, EnvConfig, EpisodeEnd, Intent, Policy, PolicyRng, PolicySpec, Scenario, SensedCar,
     ShieldParams, VecEnv, check_go, episode_seed, sense, shield_fallback, splitmix64,
 };
 use crossroads_transport::grpc::ReplayClient;
@@ -25,7 +25,7 @@ use crossroads_types::codec::ObservationEncoding;
 use rand::{RngExt, SeedableRng};
 
 use crate::error::ActorError;
-use crate::exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode};
+use crate::exploration::{AbsorbingGo, EpsilonGreedy, Intents, Ladder, Mode};
 use crate::metrics::ActorMetrics;
 use crate::nstep::{BatchBuilder, EncodedObs, NStepAssembler, NStepTransition, ObsRef};
 use crate::push::Pusher;
@@ -59,6 +59,9 @@ pub struct ActorSettings {
     pub mode: Mode,
     /// Explore an absorbing *go* once per episode (see [`EpsilonGreedy`]).
     pub explore_go_once: bool,
+    /// Explore by intents held this many decisions on average
+    /// (`actor.explore_intents`, [`Intents`]); `None` when off.
+    pub intent_hold: Option<f64>,
     /// Cut n-step windows before exploratory actions.
     pub cut_at_exploration: bool,
     /// Act on the environments in two lanes, one lane's forward pass
@@ -110,6 +113,28 @@ impl GoForks {
             go,
         }))
     }
+}
+
+/// `actor.intent_hold` where `actor.explore_intents` is on; an error naming
+/// the key where the action set has no creep to encode (TTG) or the hold
+/// is out of range.
+fn intent_hold_of(config: &ActorConfig, action_set: ActionSet) -> Result<Option<f64>, ActorError> {
+    if !config.explore_intents {
+        return Ok(None);
+    }
+    if action_set.encode(Intent::Creep, 0.0, 1.0).is_none() {
+        return Err(ActorError::Config(format!(
+            "actor.explore_intents: {} actions cannot creep; use creep or sequential actions",
+            action_set.name()
+        )));
+    }
+    if !(1.0..=1000.0).contains(&config.intent_hold) {
+        return Err(ActorError::Config(format!(
+            "actor.intent_hold must be in [1, 1000], got {}",
+            config.intent_hold
+        )));
+    }
+    Ok(Some(config.intent_hold))
 }
 
 /// The safety shield in the acting loop (`actor.shield`,
@@ -279,6 +304,7 @@ impl ActorSettings {
         let demonstrations = Demonstrations::from_config(config, action_set)?;
         let shield = ActorShield::from_config(config, action_set)?;
         let go_forks = GoForks::from_config(config, action_set)?;
+        let intent_hold = intent_hold_of(config, action_set)?;
         Ok(Self {
             scenario,
             action_set,
@@ -292,6 +318,7 @@ impl ActorSettings {
             seed: actor_seed(config.seed, index),
             mode,
             explore_go_once: config.explore_go_once,
+            intent_hold,
             cut_at_exploration: config.cut_at_exploration,
             pipeline: config.pipeline,
             demonstrations,
@@ -446,6 +473,8 @@ struct Lane {
     q: Vec<f32>,
     actions: Vec<usize>,
     episode_steps: Vec<u32>,
+    /// Each ego's speed at the decision (for exploring intents).
+    speeds: Vec<f64>,
     emitted: Vec<NStepTransition>,
     /// `actions` are chosen and not yet applied.
     decided: bool,
@@ -794,6 +823,13 @@ impl Lane {
                 step_limit: settings.scenario.spec().step_limit,
             });
         }
+        if let Some(mean_hold) = settings.intent_hold {
+            explorer = explorer.with_intents(Intents {
+                set: settings.action_set,
+                creep_speed: settings.scenario.spec().ego.params.creep_speed,
+                mean_hold,
+            });
+        }
         let m = envs.len();
         let demo = settings.demonstrations.and_then(|d| {
             let envs = d.first.max(range.start)..range.end;
@@ -815,6 +851,7 @@ impl Lane {
             q: vec![0.0; m * envs.num_actions()],
             actions: vec![0; m],
             episode_steps: vec![0; m],
+            speeds: vec![0.0; m],
             emitted: Vec::new(),
             decided: false,
             next_obs_id: k,
@@ -867,11 +904,18 @@ impl Lane {
                 }
             }
         }
-        for (i, steps) in self.episode_steps.iter_mut().enumerate() {
-            *steps = self.envs.env(i).map_or(0, crossroads_sim::Env::steps);
+        for i in 0..m {
+            let env = self.envs.env(i);
+            self.episode_steps[i] = env.map_or(0, crossroads_sim::Env::steps);
+            self.speeds[i] = env.map_or(0.0, |e| e.ego().v);
         }
-        self.explorer
-            .choose(&self.q, a, &self.episode_steps, &mut self.actions);
+        self.explorer.choose(
+            &self.q,
+            a,
+            &self.episode_steps,
+            &self.speeds,
+            &mut self.actions,
+        );
         let demo = self.demo.as_mut().filter(|_| demonstrating);
         let shown = demo.as_ref().map_or(0..0, |d| d.envs.clone());
         if let Some(d) = demo {

@@ -1,7 +1,9 @@
 //! Exploration: the Ape-X epsilon ladder over every environment of every
 //! actor, and epsilon-greedy choices with a seeded random stream per
-//! environment that keep an absorbing *go* from ending exploration early.
+//! environment that keep an absorbing *go* from ending exploration early,
+//! or that hold an intent for several decisions.
 
+use crossroads_sim::{ActionSet, Intent};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -139,6 +141,37 @@ pub struct AbsorbingGo {
     pub step_limit: u32,
 }
 
+/// Exploration by intents (`actor.explore_intents`): an exploring
+/// environment holds wait, creep or go for a geometric number of
+/// decisions, each decision the action of `set` that carries the intent
+/// out at the ego's present speed ([`ActionSet::encode`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intents {
+    /// The action set the intents are encoded in (Creep or Sequential).
+    pub set: ActionSet,
+    /// The scenario's creep speed, m/s.
+    pub creep_speed: f64,
+    /// Mean hold, decisions (at least 1).
+    pub mean_hold: f64,
+}
+
+impl Intents {
+    /// The intents an exploring environment draws from, uniformly.
+    const ALL: [Intent; 3] = [Intent::Wait, Intent::Creep, Intent::Go];
+
+    /// A hold drawn from the geometric distribution on 1, 2, ... with
+    /// mean `mean_hold`.
+    fn draw_hold(&self, rng: &mut Xoshiro256PlusPlus) -> u32 {
+        if self.mean_hold <= 1.0 {
+            return 1;
+        }
+        let stop = 1.0 / self.mean_hold;
+        let u: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+        let extra = (u.ln() / (1.0 - stop).ln()).floor();
+        1 + extra.min(f64::from(u32::MAX - 1)) as u32
+    }
+}
+
 /// Epsilon-greedy choices for M environments, each with its own random
 /// stream, so choices depend on the seed and the environment's index only.
 ///
@@ -150,6 +183,11 @@ pub struct AbsorbingGo {
 /// episode gets a *go* due at a step drawn uniformly over the step limit,
 /// so exploring gos fall evenly over every phase of an episode (before the
 /// stop line, at the creep limit, late).
+///
+/// With [`Intents`], where the epsilon fires and no intent is held, the
+/// environment draws an intent and its hold instead of one action, and
+/// follows it to the hold's end or the episode's (the absorbing *go*'s
+/// schedule is then off: a held *go* is the one exploring *go*).
 #[derive(Debug, Clone)]
 pub struct EpsilonGreedy {
     mode: Mode,
@@ -158,6 +196,9 @@ pub struct EpsilonGreedy {
     rngs: Vec<Xoshiro256PlusPlus>,
     go: Option<AbsorbingGo>,
     go_at: Vec<Option<u32>>,
+    intents: Option<Intents>,
+    /// Per environment, the intent held and the decisions it has left.
+    held: Vec<Option<(Intent, u32)>>,
     greedy: Vec<bool>,
 }
 
@@ -183,8 +224,16 @@ impl EpsilonGreedy {
             rngs,
             go: None,
             go_at: vec![None; envs],
+            intents: None,
+            held: vec![None; envs],
             greedy: vec![true; envs],
         }
+    }
+
+    /// Explores by intents (see the type and [`Intents`]).
+    pub fn with_intents(mut self, intents: Intents) -> Self {
+        self.intents = Some(intents);
+        self
     }
 
     /// Explores an absorbing *go* once per episode at most (see the type).
@@ -205,23 +254,57 @@ impl EpsilonGreedy {
 
     /// Writes one action per environment from its row of `q` (`envs x
     /// num_actions`); `steps` holds the simulation steps each environment's
-    /// episode has taken (0 at its first decision).
-    pub fn choose(&mut self, q: &[f32], num_actions: usize, steps: &[u32], actions: &mut [usize]) {
+    /// episode has taken (0 at its first decision), `speeds` each ego's
+    /// speed, m/s (read by [`Intents`] only; 0 where missing).
+    pub fn choose(
+        &mut self,
+        q: &[f32],
+        num_actions: usize,
+        steps: &[u32],
+        speeds: &[f64],
+        actions: &mut [usize],
+    ) {
         for (i, row) in q.chunks_exact(num_actions).enumerate().take(actions.len()) {
             let epsilon = self.mode.epsilon_of(self.first + i).clamp(0.0, 1.0);
             let best = argmax(row);
             let rng = &mut self.rngs[i];
             let step = steps.get(i).copied().unwrap_or(0);
-            let action = match self.go {
+            if step == 0 {
+                self.held[i] = None;
+            }
+            let action = match (self.go, self.intents) {
                 _ if epsilon <= 0.0 => best,
-                None => {
+                (_, Some(intents)) => {
+                    if self.held[i].is_none() && rng.random_bool(epsilon) {
+                        let intent = Intents::ALL[rng.random_range(0..Intents::ALL.len())];
+                        // A go is held to the episode's end, as an
+                        // absorbing go is: crossing is not undone.
+                        let hold = match intent {
+                            Intent::Go => u32::MAX,
+                            _ => intents.draw_hold(rng),
+                        };
+                        self.held[i] = Some((intent, hold));
+                    }
+                    match self.held[i] {
+                        Some((intent, left)) => {
+                            self.held[i] = (left > 1).then_some((intent, left - 1));
+                            let v = speeds.get(i).copied().unwrap_or(0.0);
+                            intents
+                                .set
+                                .encode(intent, v, intents.creep_speed)
+                                .unwrap_or(best)
+                        }
+                        None => best,
+                    }
+                }
+                (None, None) => {
                     if rng.random_bool(epsilon) {
                         rng.random_range(0..num_actions)
                     } else {
                         best
                     }
                 }
-                Some(go) => {
+                (Some(go), None) => {
                     if step == 0 {
                         self.go_at[i] = rng
                             .random_bool(epsilon)
@@ -302,7 +385,7 @@ mod tests {
         for _ in 0..2000 {
             for step in 0..100 {
                 let mut a = [9];
-                e.choose(&q, 3, &[step], &mut a);
+                e.choose(&q, 3, &[step], &[], &mut a);
                 if a[0] == 0 {
                     assert!(!e.was_greedy(0));
                     go_steps.push(step);
@@ -319,10 +402,68 @@ mod tests {
     }
 
     #[test]
+    fn intents_are_held_for_geometric_spells_of_their_encoded_actions() {
+        // Sequential at creep speed: wait is 1 (decelerate), creep 2
+        // (keep), go 0 (accelerate), each for one step. Greedy is 7. At
+        // epsilon 1 every decision follows a held intent: spells of wait or
+        // creep, 10 decisions on average (two of the same in a row merge:
+        // 15), until a go, which holds to the episode's end.
+        let creep_speed = 2.0;
+        let intents = Intents {
+            set: ActionSet::Sequential,
+            creep_speed,
+            mean_hold: 10.0,
+        };
+        let mut q = [0.0f32; 12];
+        q[7] = 1.0;
+        let mode = Mode::Explore {
+            ladder: Ladder::constant(1.0, 1),
+        };
+        let mut e = EpsilonGreedy::new(mode, 1, 5).with_intents(intents);
+        let (mut before_go, mut runs, mut went) = (0usize, 0usize, 0usize);
+        for _episode in 0..2000 {
+            let mut seen = Vec::new();
+            for step in 0..300 {
+                let mut a = [9];
+                e.choose(&q, 12, &[step], &[creep_speed], &mut a);
+                assert!(!e.was_greedy(0));
+                seen.push(a[0]);
+            }
+            assert!(seen.iter().all(|&a| a <= 2), "only one-step intents");
+            let Some(go) = seen.iter().position(|&a| a == 0) else {
+                continue;
+            };
+            went += 1;
+            assert!(seen[go..].iter().all(|&a| a == 0), "a go holds to the end");
+            if go > 0 {
+                before_go += go;
+                runs += 1 + seen[..go].windows(2).filter(|w| w[0] != w[1]).count();
+            }
+        }
+        assert!(went > 1950, "{went} of 2000 episodes went");
+        let mean_run = before_go as f64 / runs as f64;
+        assert!((12.0..18.0).contains(&mean_run), "mean run {mean_run}");
+        // A new episode (step 0) drops the held intent; greedy never holds.
+        let mut g = EpsilonGreedy::new(Mode::Greedy, 1, 5).with_intents(intents);
+        let mut a = [9];
+        g.choose(&q, 12, &[3], &[creep_speed], &mut a);
+        assert_eq!(a, [7]);
+        let low = Mode::Explore {
+            ladder: Ladder::constant(1e-9, 1),
+        };
+        let mut e = EpsilonGreedy::new(low, 1, 5).with_intents(intents);
+        e.held[0] = Some((Intent::Wait, 50));
+        e.choose(&q, 12, &[4], &[creep_speed], &mut a);
+        assert_eq!(a, [1], "the held wait");
+        e.choose(&q, 12, &[0], &[creep_speed], &mut a);
+        assert_eq!(a, [7], "dropped at the episode's start");
+    }
+
+    #[test]
     fn greedy_picks_the_argmax_and_epsilon_one_is_uniform() {
         let q = [0.0, 2.0, 1.0, 5.0, -1.0, 0.0];
         let mut actions = [9; 2];
-        EpsilonGreedy::new(Mode::Greedy, 2, 1).choose(&q, 3, &[0, 0], &mut actions);
+        EpsilonGreedy::new(Mode::Greedy, 2, 1).choose(&q, 3, &[0, 0], &[], &mut actions);
         assert_eq!(actions, [1, 0]);
 
         let explore = |eps| Mode::Explore {
@@ -332,7 +473,7 @@ mod tests {
         let mut counts = [0; 3];
         for _ in 0..3000 {
             let mut a = [0];
-            e.choose(&q[..3], 3, &[5], &mut a);
+            e.choose(&q[..3], 3, &[5], &[], &mut a);
             counts[a[0]] += 1;
             assert_eq!(e.was_greedy(0), a[0] == 1);
         }
@@ -353,7 +494,7 @@ mod tests {
             let mut out = Vec::new();
             for _ in 0..20 {
                 let mut a = [0; 4];
-                e.choose(&q, 5, &[1; 4], &mut a);
+                e.choose(&q, 5, &[1; 4], &[], &mut a);
                 out.extend(a);
             }
             out

@@ -37,7 +37,7 @@ pub use actor::{
 };
 pub use buffer::PushBuffer;
 pub use error::ActorError;
-pub use exploration::{AbsorbingGo, EpsilonGreedy, Ladder, Mode, epsilon_ladder};
+pub use exploration::{AbsorbingGo, EpsilonGreedy, Intents, Ladder, Mode, epsilon_ladder};
 pub use metrics::ActorMetrics;
 pub use nstep::{
     BatchBuilder, EncodedObs, FALLBACK_PRIORITY, NStepAssembler, NStepTransition, ObsRef,

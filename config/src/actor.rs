@@ -68,6 +68,21 @@ pub struct ActorConfig {
     /// uniformly over the step limit. Off: uniformly random actions, which
     /// end most exploring episodes within a few decisions.
     pub explore_go_once: bool,
+    /// Temporally extended exploration by intents (after Dabney et al.
+    /// 2021's ez-greedy): where an environment's epsilon fires and it
+    /// holds no intent, it draws one of wait, creep and go uniformly, and
+    /// a hold, geometric with mean `intent_hold` decisions (a go: to the
+    /// episode's end, as an absorbing go); for the hold every decision is
+    /// the action that carries the intent out at the ego's speed
+    /// (`ActionSet::encode`). Uniform random accelerations rarely string
+    /// together the seconds of accelerating a Sequential crossing takes,
+    /// and drift the ego into the lanes instead (an actor test measures
+    /// both). Creep-and-Go and Sequential actions only. Off: one random
+    /// action per exploring decision.
+    pub explore_intents: bool,
+    /// Mean hold of an exploring intent, in decisions
+    /// (`explore_intents`). 1 to 1000.
+    pub intent_hold: f64,
     /// Whether an n-step window is cut (bootstrapped) before an exploratory
     /// action, so that returns follow the greedy policy. Off: returns sum
     /// over whatever was taken.
@@ -159,6 +174,8 @@ impl Default for ActorConfig {
             epsilon_alpha: 7.0,
             ladder_over_envs: true,
             explore_go_once: true,
+            explore_intents: false,
+            intent_hold: 10.0,
             cut_at_exploration: true,
             pipeline: true,
             early_demo_envs: 0,
@@ -224,6 +241,11 @@ impl ActorConfig {
             "must be at least 1".to_owned(),
         );
         problems.within("in_flight", self.in_flight, 1..=1024);
+        problems.check(
+            (1.0..=1000.0).contains(&self.intent_hold),
+            "intent_hold",
+            format!("must be in [1, 1000], got {}", self.intent_hold),
+        );
         problems.check(
             self.veto_cost.is_finite() && self.veto_cost >= 0.0,
             "veto_cost",
