@@ -133,6 +133,8 @@ struct JsonReport<'a> {
     mean_brake_ci95: Interval,
     mean_brake_light_ci95: Interval,
     mean_wait_ci95: Option<Interval>,
+    mean_go_offset_m: Option<f64>,
+    mean_go_speed: Option<f64>,
     mean_return: f64,
     mean_return_ci95: Interval,
     wall_seconds: f64,
@@ -443,6 +445,8 @@ fn json(r: &EvalReport, wall_seconds: f64) -> JsonReport<'_> {
         mean_brake_ci95: r.mean_brake_ci,
         mean_brake_light_ci95: r.mean_brake_light_ci,
         mean_wait_ci95: r.mean_wait_ci,
+        mean_go_offset_m: r.mean_go_offset_m,
+        mean_go_speed: r.mean_go_speed,
         mean_return: r.mean_return,
         mean_return_ci95: r.mean_return_ci,
         wall_seconds,
@@ -475,6 +479,12 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
         }
         _ => "      -     (never went)".to_owned(),
     };
+    let at_go = match (r.mean_go_offset_m, r.mean_go_speed) {
+        (Some(m), Some(v)) => format!(
+            "{m:7.2} m past the creep limit (negative: short of it), {v:.2} m/s (means, runs that went)"
+        ),
+        _ => "      -".to_owned(),
+    };
     format!(
         "{policy} on {scenario} ({actions} actions), {trials} trials, seed {seed}, {wall:.2} s\n\
          \x20                  value      95 % interval\n\
@@ -483,6 +493,7 @@ pub fn text(r: &EvalReport, wall_seconds: f64) -> String {
          \x20 timeout      {t}\n\
          \x20 mean time    {time}   (successful runs)\n\
          \x20 mean wait    {wait}   (before go, runs that went)\n\
+         \x20 at go        {at_go}\n\
          \x20 mean brake   {b}   (traffic braking per run)\n\
          \x20 brake light  {l}   (per run, SUMO's rule)\n\
          \x20 mean return  {ret}   (per run, undiscounted, the scenario's rewards)\n",

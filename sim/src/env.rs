@@ -91,6 +91,10 @@ pub struct EpisodeMetrics {
     pub brake_light_s: f64,
     /// Seconds before *go* was chosen; `None` while it has not been.
     pub wait_s: Option<f64>,
+    /// Where and how fast the ego was when *go* was chosen: its front,
+    /// m past the creep limit (negative: short of it), and its speed,
+    /// m/s; `None` while it has not gone.
+    pub go_state: Option<(f64, f64)>,
 }
 
 /// The ego's longitudinal state along its path.
@@ -123,6 +127,8 @@ pub struct Env {
     steps: u32,
     /// Step at which *go* was chosen.
     go_step: Option<u32>,
+    /// [`EpisodeMetrics::go_state`].
+    go_state: Option<(f64, f64)>,
     outcome: Option<Outcome>,
     /// Visibility of each observation cell from the sensor, when the
     /// observation has occlusion channels.
@@ -153,6 +159,7 @@ impl Env {
             foe_time: vec![0.0; n],
             steps: 0,
             go_step: None,
+            go_state: None,
             outcome: None,
             cell_visible: vec![true; spec.rows * spec.cols],
             visible_from: None,
@@ -201,6 +208,7 @@ impl Env {
         };
         self.steps = 0;
         self.go_step = None;
+        self.go_state = None;
         self.outcome = None;
         self.visible_from = None;
         self.update_ego_geometry();
@@ -262,7 +270,11 @@ impl Env {
         // Drivers see a go at once, not a step later.
         if control == Control::Go {
             self.ego.committed = true;
-            self.go_step.get_or_insert(self.steps);
+            if self.go_step.is_none() {
+                self.go_step = Some(self.steps);
+                let limit = sc.spec().ego.creep_limit_s;
+                self.go_state = Some((self.ego.s - limit, self.ego.v));
+            }
         }
         self.update_foes(dt);
         self.move_ego(control, dt);
@@ -582,6 +594,7 @@ impl Env {
             brake_time_s: self.traffic.brake_time_s(),
             brake_light_s: self.traffic.brake_light_time_s(),
             wait_s: self.go_step.map(|k| f64::from(k) * self.scenario.dt()),
+            go_state: self.go_state,
         }
     }
 

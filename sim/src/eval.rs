@@ -69,6 +69,10 @@ pub struct TrialResult {
     pub brake_light_s: f64,
     /// Seconds before the ego chose *go*; `None` if it never did.
     pub wait_s: Option<f64>,
+    /// The ego's front past the creep limit (m, negative short of it) and
+    /// its speed (m/s) when it chose *go*; `None` if it never did (or the
+    /// trial was not simulated here).
+    pub go_state: Option<(f64, f64)>,
     /// Undiscounted return under the scenario's rewards
     /// ([`crate::Rewards::episode_return`]).
     pub episode_return: f64,
@@ -118,6 +122,12 @@ pub struct EvalReport {
     pub mean_wait_s: Option<f64>,
     /// Its interval.
     pub mean_wait_ci: Option<Interval>,
+    /// Mean of the ego's front past the creep limit when it chose *go*
+    /// (negative: short of it), m, over the trials that went; `None` if
+    /// none did.
+    pub mean_go_offset_m: Option<f64>,
+    /// Mean ego speed when it chose *go*, m/s, over the trials that went.
+    pub mean_go_speed: Option<f64>,
     /// Mean undiscounted return per trial under the scenario's rewards
     /// (+1 success, -10 collision, -0.01 a step by default): the task's
     /// objective, by which training keeps its best weights.
@@ -228,6 +238,7 @@ fn run_chunk(
                     brake_s: m.brake_time_s,
                     brake_light_s: m.brake_light_s,
                     wait_s: m.wait_s,
+                    go_state: m.go_state,
                     episode_return: scenario.spec().rewards.episode_return(outcome, m.steps),
                 });
             }
@@ -281,6 +292,9 @@ pub fn summarize(
     let brake = mean_ci(&brakes);
     let light = mean_ci(&lights);
     let wait = mean_ci(&waits);
+    let gone: Vec<(f64, f64)> = results.iter().filter_map(|r| r.go_state).collect();
+    let go_offsets: Vec<f64> = gone.iter().map(|g| g.0).collect();
+    let go_speeds: Vec<f64> = gone.iter().map(|g| g.1).collect();
     let zero = Interval {
         low: 0.0,
         high: 0.0,
@@ -305,6 +319,8 @@ pub fn summarize(
         mean_brake_light_ci: light.map_or(zero, |b| b.1),
         mean_wait_s: wait.map(|w| w.0),
         mean_wait_ci: wait.map(|w| w.1),
+        mean_go_offset_m: mean_ci(&go_offsets).map(|m| m.0),
+        mean_go_speed: mean_ci(&go_speeds).map(|m| m.0),
         mean_return: ret.map_or(0.0, |r| r.0),
         mean_return_ci: ret.map_or(zero, |r| r.1),
     }

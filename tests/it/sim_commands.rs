@@ -44,6 +44,8 @@ fn eval_json_has_the_documented_fields_and_ignores_thread_count() {
         "mean_brake_s",
         "mean_brake_light_s",
         "mean_wait_s",
+        "mean_go_offset_m",
+        "mean_go_speed",
     ] {
         assert!(one.get(field).is_some(), "{field} missing: {one}");
     }

@@ -219,6 +219,7 @@ pub fn run(args: &SumoCheckArgs) -> anyhow::Result<ExitCode> {
                         brake_s: r.brake_s,
                         brake_light_s: r.brake_s,
                         wait_s: r.wait_s,
+                        go_state: None,
                         episode_return: plan.compiled.spec().rewards.episode_return(
                             r.outcome,
                             (r.time_s / plan.compiled.dt()).round() as u32,

@@ -290,6 +290,25 @@ fn sequential_and_creep_dynamics() {
 }
 
 #[test]
+fn the_metrics_say_where_and_how_fast_the_ego_went() {
+    let mut c = env("occluded", ActionSet::Creep);
+    c.clear_traffic();
+    let limit = c.scenario().spec().ego.creep_limit_s;
+    for _ in 0..3 {
+        c.step(1).unwrap(); // creep
+    }
+    assert_eq!(c.metrics().go_state, None, "not gone yet");
+    let before = c.ego();
+    c.step(2).unwrap(); // go: to the goal, the state at the decision kept
+    let (offset, speed) = c.metrics().go_state.expect("gone");
+    assert!((offset - (before.s - limit)).abs() < 1e-12, "{offset}");
+    assert!(offset < 0.0 && before.v > 0.0, "{before:?}");
+    assert_eq!(speed, before.v);
+    c.reset(1);
+    assert_eq!(c.metrics().go_state, None, "a new episode forgets it");
+}
+
+#[test]
 fn same_seed_same_episode() {
     for name in ["challenge", "occluded"] {
         let mut a = env(name, ActionSet::Creep);
