@@ -208,6 +208,12 @@ impl Demonstrations {
                 "actor.demo_policy: {text} demonstrates nothing; use ttc:<seconds> or ttc-creep:<seconds>"
             )));
         }
+        if matches!(policy, PolicySpec::Go) {
+            return Err(ActorError::Config(format!(
+                "actor.demo_policy: {text} goes at once, looking at nothing; use ttc:<seconds> \
+                 or ttc-creep:<seconds>"
+            )));
+        }
         if matches!(policy, PolicySpec::Oracle(_)) {
             return Err(ActorError::Config(format!(
                 "actor.demo_policy: {text} sees cars behind the walls; its demonstrations would \

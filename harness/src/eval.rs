@@ -25,7 +25,8 @@ use crate::progress;
 #[derive(Debug, Args)]
 pub struct PolicyArgs {
     /// Policy: ttc:<seconds>, ttc-creep:<seconds>, random, never (the ego
-    /// waits out the time limit: traffic alone), oracle:<futures> (sees
+    /// waits out the time limit: traffic alone), go (wants to go at every
+    /// decision: with --shield, the shield alone), oracle:<futures> (sees
     /// hidden cars and goes when going reaches the goal in every one of
     /// that many futures: the upper bound under occlusion), or a trained
     /// network: a checkpoint folder (runs/NAME/best,
@@ -182,7 +183,7 @@ pub fn load(args: &PolicyArgs) -> anyhow::Result<LoadedPolicy> {
             }
             None => (
                 parse_policy(&args.policy).context(
-                    "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, oracle:<futures>, random or never)",
+                    "--policy (a checkpoint folder, a .safetensors file, ttc:<s>, ttc-creep:<s>, oracle:<futures>, random, never or go)",
                 )?,
                 args.actions.unwrap_or(ActionSet::Ttg),
             ),

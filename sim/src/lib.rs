@@ -63,8 +63,8 @@ pub use occlusion::{ObstacleSpec, OcclusionLayout, OcclusionSpec, Side, line_of_
 pub use params::{EgoParams, Rewards, TrafficParams};
 pub use path::{Path, PathSpec, PieceSpec};
 pub use policy::{
-    NeverPolicy, OraclePolicy, Policy, PolicyRng, PolicySpec, RandomPolicy, ShieldCounters,
-    ShieldStats, ShieldedPolicy, TtcPolicy, parse_policy, shield_fallback,
+    GoPolicy, NeverPolicy, OraclePolicy, Policy, PolicyRng, PolicySpec, RandomPolicy,
+    ShieldCounters, ShieldStats, ShieldedPolicy, TtcPolicy, parse_policy, shield_fallback,
 };
 pub use render::{Color, Layer, RenderView, Scene, SceneOptions, Shape, palette};
 pub use risk::{

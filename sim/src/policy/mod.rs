@@ -14,7 +14,7 @@ mod random;
 mod shielded;
 mod ttc;
 
-pub use never::NeverPolicy;
+pub use never::{GoPolicy, NeverPolicy};
 pub use oracle::OraclePolicy;
 pub use random::RandomPolicy;
 pub use shielded::{ShieldCounters, ShieldStats, ShieldedPolicy, shield_fallback};
@@ -73,6 +73,8 @@ pub enum PolicySpec {
     Random,
     /// Never goes ([`NeverPolicy`]).
     Never,
+    /// `go`: wants to go at every decision ([`GoPolicy`]).
+    Go,
     /// `oracle:<futures>`: goes when going reaches the goal in every one of
     /// that many forks of the present, hidden cars included
     /// ([`OraclePolicy`]).
@@ -87,6 +89,7 @@ impl PolicySpec {
             Self::TtcCreep(t) => Box::new(TtcPolicy::new(t, true)),
             Self::Random => Box::new(RandomPolicy),
             Self::Never => Box::new(NeverPolicy),
+            Self::Go => Box::new(GoPolicy),
             Self::Oracle(k) => Box::new(OraclePolicy::new(k)),
         }
     }
@@ -103,10 +106,11 @@ impl std::str::FromStr for PolicySpec {
         match s {
             "random" => return Ok(Self::Random),
             "never" => return Ok(Self::Never),
+            "go" => return Ok(Self::Go),
             _ => {}
         }
         let (kind, value) = s.split_once(':').ok_or_else(|| {
-            err("expected ttc:<seconds>, ttc-creep:<seconds>, oracle:<futures>, random or never")
+            err("expected ttc:<seconds>, ttc-creep:<seconds>, oracle:<futures>, random, never or go")
         })?;
         if kind == "oracle" {
             return match value.parse::<u32>() {
@@ -128,7 +132,7 @@ impl std::str::FromStr for PolicySpec {
             "ttc" => Ok(Self::Ttc(t)),
             "ttc-creep" => Ok(Self::TtcCreep(t)),
             _ => Err(err(
-                "expected ttc:<seconds>, ttc-creep:<seconds>, oracle:<futures>, random or never",
+                "expected ttc:<seconds>, ttc-creep:<seconds>, oracle:<futures>, random, never or go",
             )),
         }
     }
@@ -141,13 +145,14 @@ impl std::fmt::Display for PolicySpec {
             Self::TtcCreep(t) => write!(f, "ttc-creep:{t}"),
             Self::Random => f.write_str("random"),
             Self::Never => f.write_str("never"),
+            Self::Go => f.write_str("go"),
             Self::Oracle(k) => write!(f, "oracle:{k}"),
         }
     }
 }
 
 /// Parses `ttc:<seconds>`, `ttc-creep:<seconds>`, `oracle:<futures>`,
-/// `random` or `never` into a policy.
+/// `random`, `never` or `go` into a policy.
 pub fn parse_policy(s: &str) -> Result<Box<dyn Policy>, SimError> {
     Ok(s.parse::<PolicySpec>()?.build())
 }
@@ -168,6 +173,8 @@ mod tests {
         );
         assert_eq!("random".parse::<PolicySpec>().unwrap(), PolicySpec::Random);
         assert_eq!("never".parse::<PolicySpec>().unwrap(), PolicySpec::Never);
+        assert_eq!("go".parse::<PolicySpec>().unwrap(), PolicySpec::Go);
+        assert_eq!(PolicySpec::Go.to_string(), "go");
         assert_eq!(
             "oracle:16".parse::<PolicySpec>().unwrap(),
             PolicySpec::Oracle(16)
