@@ -116,8 +116,8 @@ impl GoForks {
 }
 
 /// `actor.intent_hold` where `actor.explore_intents` is on; an error naming
-/// the key where the action set has no creep to encode (TTG) or the hold
-/// is out of range.
+/// the key where the action set has no creep to encode (TTG). The hold's
+/// range is the config's check (`ActorConfig::validate`).
 fn intent_hold_of(config: &ActorConfig, action_set: ActionSet) -> Result<Option<f64>, ActorError> {
     if !config.explore_intents {
         return Ok(None);
@@ -126,12 +126,6 @@ fn intent_hold_of(config: &ActorConfig, action_set: ActionSet) -> Result<Option<
         return Err(ActorError::Config(format!(
             "actor.explore_intents: {} actions cannot creep; use creep or sequential actions",
             action_set.name()
-        )));
-    }
-    if !(1.0..=1000.0).contains(&config.intent_hold) {
-        return Err(ActorError::Config(format!(
-            "actor.intent_hold must be in [1, 1000], got {}",
-            config.intent_hold
         )));
     }
     Ok(Some(config.intent_hold))

@@ -12,15 +12,9 @@ use plotters::style::Color as _;
 
 use crate::{DrawError, FONT, register_font};
 
-/// Writes `scene` to `path` as a PNG.
+/// Writes `scene` to `path` as a PNG: [`rgb`]'s pixels, encoded.
 pub fn write_png(path: &Path, scene: &Scene) -> Result<(), DrawError> {
-    let (w, h) = scene.size;
-    let mut pixels = vec![0u8; 3 * w as usize * h as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut pixels, scene.size).into_drawing_area();
-        draw(&root, scene).map_err(|e| DrawError::draw(path, e))?;
-        root.present().map_err(|e| DrawError::draw(path, e))?;
-    }
+    let pixels = raster(scene, |e| DrawError::draw(path, e))?;
     crate::encode_png(path, scene.size, &pixels)
 }
 
@@ -34,12 +28,17 @@ pub fn write_svg(path: &Path, scene: &Scene) -> Result<(), DrawError> {
 /// Rasterises `scene` into RGB bytes, row by row from the top, three a
 /// pixel: the picture [`write_png`] writes (the Python face's `render`).
 pub fn rgb(scene: &Scene) -> Result<Vec<u8>, DrawError> {
+    raster(scene, DrawError::raster)
+}
+
+/// `scene`'s RGB pixels; a failure as `error` makes it.
+fn raster(scene: &Scene, error: impl Fn(String) -> DrawError) -> Result<Vec<u8>, DrawError> {
     let (w, h) = scene.size;
     let mut pixels = vec![0u8; 3 * w as usize * h as usize];
     {
         let root = BitMapBackend::with_buffer(&mut pixels, scene.size).into_drawing_area();
-        draw(&root, scene).map_err(DrawError::raster)?;
-        root.present().map_err(DrawError::raster)?;
+        draw(&root, scene).map_err(|e| error(e.to_string()))?;
+        root.present().map_err(|e| error(e.to_string()))?;
     }
     Ok(pixels)
 }

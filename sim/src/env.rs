@@ -125,10 +125,8 @@ pub struct Env {
     foes: Vec<EgoFoe>,
     foe_time: Vec<f64>,
     steps: u32,
-    /// Step at which *go* was chosen.
-    go_step: Option<u32>,
-    /// [`EpisodeMetrics::go_state`].
-    go_state: Option<(f64, f64)>,
+    /// Step at which *go* was chosen, and [`EpisodeMetrics::go_state`].
+    gone: Option<(u32, (f64, f64))>,
     outcome: Option<Outcome>,
     /// Visibility of each observation cell from the sensor, when the
     /// observation has occlusion channels.
@@ -158,8 +156,7 @@ impl Env {
             foes: vec![EgoFoe::None; n],
             foe_time: vec![0.0; n],
             steps: 0,
-            go_step: None,
-            go_state: None,
+            gone: None,
             outcome: None,
             cell_visible: vec![true; spec.rows * spec.cols],
             visible_from: None,
@@ -207,8 +204,7 @@ impl Env {
             committed: false,
         };
         self.steps = 0;
-        self.go_step = None;
-        self.go_state = None;
+        self.gone = None;
         self.outcome = None;
         self.visible_from = None;
         self.update_ego_geometry();
@@ -270,10 +266,9 @@ impl Env {
         // Drivers see a go at once, not a step later.
         if control == Control::Go {
             self.ego.committed = true;
-            if self.go_step.is_none() {
-                self.go_step = Some(self.steps);
+            if self.gone.is_none() {
                 let limit = sc.spec().ego.creep_limit_s;
-                self.go_state = Some((self.ego.s - limit, self.ego.v));
+                self.gone = Some((self.steps, (self.ego.s - limit, self.ego.v)));
             }
         }
         self.update_foes(dt);
@@ -593,8 +588,8 @@ impl Env {
             time_s: f64::from(self.steps) * self.scenario.dt(),
             brake_time_s: self.traffic.brake_time_s(),
             brake_light_s: self.traffic.brake_light_time_s(),
-            wait_s: self.go_step.map(|k| f64::from(k) * self.scenario.dt()),
-            go_state: self.go_state,
+            wait_s: self.gone.map(|(k, _)| f64::from(k) * self.scenario.dt()),
+            go_state: self.gone.map(|(_, state)| state),
         }
     }
 

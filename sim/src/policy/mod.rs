@@ -22,13 +22,36 @@ pub use ttc::TtcPolicy;
 
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use crate::action::ActionSet;
+use crate::action::{ActionSet, Intent};
 use crate::env::Env;
 use crate::error::SimError;
 
 /// Random number generator handed to a policy, one per environment, so a
 /// stochastic policy's choices depend only on its episode's seed.
 pub type PolicyRng = Xoshiro256PlusPlus;
+
+/// The rules' `act`: for each environment, the action of its action set
+/// that carries out `intent(env)` at the ego's speed
+/// ([`ActionSet::encode`]); an error naming `policy` where the set cannot
+/// (TTG has no creep).
+fn act_by_intent(
+    policy: &dyn Policy,
+    envs: &[Env],
+    actions: &mut [usize],
+    intent: impl Fn(&Env) -> Intent,
+) -> Result<(), SimError> {
+    for (env, a) in envs.iter().zip(actions.iter_mut()) {
+        let set = env.config().action_set;
+        let p = &env.scenario().spec().ego.params;
+        *a = set
+            .encode(intent(env), env.ego().v, p.creep_speed)
+            .ok_or_else(|| SimError::Unsupported {
+                policy: policy.name(),
+                set: set.name(),
+            })?;
+    }
+    Ok(())
+}
 
 /// Chooses actions for a batch of environments in one call, so a neural
 /// policy can run one batched forward pass for all of them.

@@ -5,7 +5,7 @@
 //! form (go whenever it allows, else its fallback: creep to the limit,
 //! then wait).
 
-use super::{Policy, PolicyRng};
+use super::{Policy, PolicyRng, act_by_intent};
 use crate::action::{ActionSet, Intent};
 use crate::env::Env;
 use crate::error::SimError;
@@ -29,18 +29,7 @@ impl Policy for NeverPolicy {
         _rngs: &mut [PolicyRng],
         actions: &mut [usize],
     ) -> Result<(), SimError> {
-        for (env, a) in envs.iter().zip(actions.iter_mut()) {
-            let p = &env.scenario().spec().ego.params;
-            *a = env
-                .config()
-                .action_set
-                .encode(Intent::Wait, env.ego().v, p.creep_speed)
-                .ok_or_else(|| SimError::Unsupported {
-                    policy: self.name(),
-                    set: env.config().action_set.name(),
-                })?;
-        }
-        Ok(())
+        act_by_intent(self, envs, actions, |_| Intent::Wait)
     }
 }
 
@@ -68,18 +57,7 @@ impl Policy for GoPolicy {
         _rngs: &mut [PolicyRng],
         actions: &mut [usize],
     ) -> Result<(), SimError> {
-        for (env, a) in envs.iter().zip(actions.iter_mut()) {
-            let p = &env.scenario().spec().ego.params;
-            *a = env
-                .config()
-                .action_set
-                .encode(Intent::Go, env.ego().v, p.creep_speed)
-                .ok_or_else(|| SimError::Unsupported {
-                    policy: self.name(),
-                    set: env.config().action_set.name(),
-                })?;
-        }
-        Ok(())
+        act_by_intent(self, envs, actions, |_| Intent::Go)
     }
 }
 

@@ -1,6 +1,6 @@
 //! The time-to-collision baseline, with and without creeping.
 
-use super::{Policy, PolicyRng};
+use super::{Policy, PolicyRng, act_by_intent};
 use crate::action::{ActionSet, Intent};
 use crate::env::Env;
 use crate::error::SimError;
@@ -71,16 +71,6 @@ impl Policy for TtcPolicy {
         _rngs: &mut [PolicyRng],
         actions: &mut [usize],
     ) -> Result<(), SimError> {
-        for (env, a) in envs.iter().zip(actions.iter_mut()) {
-            let set = env.config().action_set;
-            let p = &env.scenario().spec().ego.params;
-            *a = set
-                .encode(self.intent(env), env.ego().v, p.creep_speed)
-                .ok_or_else(|| SimError::Unsupported {
-                    policy: self.name(),
-                    set: set.name(),
-                })?;
-        }
-        Ok(())
+        act_by_intent(self, envs, actions, |env| self.intent(env))
     }
 }
