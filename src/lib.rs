@@ -53,7 +53,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Learner(_) => commands::learner::run(&config),
         Command::Checkpoints(args) => commands::checkpoints::run(&config, &args),
         Command::Actor(args) => commands::actor::run(&config, &args),
-        Command::Train(args) => crossroads_harness::train::run(&config, &args),
+        Command::Train(args) => crossroads_harness::train::run(&cli.global, &config, &args),
         Command::Reproduce(args) => crossroads_harness::reproduce::run(&cli.global, &args),
         Command::Docs(args) => commands::docs::run(&args),
     }

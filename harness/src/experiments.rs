@@ -9,10 +9,12 @@
 //! `crossroads reproduce` trains them. `tests/it/experiments.rs` checks the
 //! files.
 
-/// One experiment: `<actions>-<scenario>` and its TOML text.
+/// One experiment: `<actions>-<scenario>` (a variant of one:
+/// `<actions>-<scenario>+<variant>`) and its TOML text.
 #[derive(Debug, Clone, Copy)]
 pub struct Experiment {
-    /// `<actions>-<scenario>`, the file's stem.
+    /// `<actions>-<scenario>` or `<actions>-<scenario>+<variant>`, the
+    /// file's stem.
     pub name: &'static str,
     /// The configuration (a TOML document with `[sim]`, `[actor]`,
     /// `[replay]`, `[learner]` and `[train]`).
@@ -48,6 +50,7 @@ pub const EXPERIMENTS: &[Experiment] = experiments![
     "sequential-challenge",
     "ttg-occluded",
     "creep-occluded",
+    "creep-occluded+shield",
     "sequential-occluded",
 ];
 
@@ -80,7 +83,7 @@ pub fn named(name: &str) -> Option<Experiment> {
 }
 
 /// The experiment that trains `actions` on `scenario`, if the paper has
-/// one (`scenario` is a built-in name; a file has none).
+/// one (`scenario` is a built-in name; a file has none); never a variant.
 pub fn find(actions: &str, scenario: &str) -> Option<Experiment> {
     named(&format!("{actions}-{scenario}"))
 }

@@ -525,3 +525,38 @@ fn bench_time_to_target_trains_each_seed_and_reports_medians() {
     );
     assert!(!runs.join("seed-1").exists(), "it trained first");
 }
+
+/// `--experiment NAME train` runs in `runs/NAME`: a variant
+/// (`creep-occluded+shield`) does not share its base experiment's folder,
+/// and `--resume` reads that folder's config.toml, not another run's.
+#[test]
+fn an_experiment_trains_in_a_folder_of_its_own_name() {
+    let scratch = tempfile::tempdir().expect("temp dir");
+    let run = scratch.path().join("runs/creep-occluded+shield");
+    std::fs::create_dir_all(&run).expect("mkdir");
+    // A saved config that cannot start: a resume that reads it fails on it
+    // before anything trains.
+    std::fs::write(run.join("config.toml"), "[actor]\nenvs = 0\n").expect("write");
+    let out = crate::crossroads()
+        .command()
+        .current_dir(scratch.path())
+        // `--updates 1`: were the folder not read, a short run, not a long one.
+        .args([
+            "--experiment",
+            "creep-occluded+shield",
+            "train",
+            "--resume",
+            "--updates",
+            "1",
+        ])
+        .output()
+        .expect("run");
+    assert!(!out.status.success(), "it trained");
+    let err = stderr(&out);
+    assert!(err.contains("actor.envs"), "{err}");
+    assert!(
+        !scratch.path().join("runs/creep-occluded").exists()
+            && !scratch.path().join("runs/ttg-left").exists(),
+        "another experiment's folder"
+    );
+}

@@ -51,11 +51,29 @@ fn every_experiment_config_is_valid_and_consistent() {
             .expect("stem")
             .to_string_lossy()
             .into_owned();
+        let (base, variant) = stem
+            .split_once('+')
+            .map_or((stem.as_str(), None), |(b, v)| (b, Some(v)));
         assert_eq!(
-            stem,
+            base,
             format!("{}-{}", c.sim.action_set, c.sim.scenario),
-            "file names say <actions>-<scenario>"
+            "file names say <actions>-<scenario>, or <actions>-<scenario>+<variant>"
         );
+        if let Some(variant) = variant {
+            assert!(
+                !variant.is_empty()
+                    && variant
+                        .chars()
+                        .all(|ch| ch.is_ascii_lowercase() || ch.is_ascii_digit()),
+                "{}: a variant is lowercase letters and digits",
+                path.display()
+            );
+            assert!(
+                dir.join(format!("{base}.toml")).is_file(),
+                "{}: a variant of an experiment that does not exist",
+                path.display()
+            );
+        }
         assert!(
             c.learner.max_updates > 0,
             "{} has no budget",
@@ -63,7 +81,10 @@ fn every_experiment_config_is_valid_and_consistent() {
         );
         seen += 1;
     }
-    assert_eq!(seen, 13, "5 TTG + 5 Sequential + 3 occlusion experiments");
+    assert_eq!(
+        seen, 14,
+        "5 TTG + 5 Sequential + 4 occlusion experiments (one a variant)"
+    );
 }
 
 /// A target's time bound is TTC's, and TTC's time is a measurement: it has
@@ -135,17 +156,23 @@ fn every_target_follows_the_baselines_of_the_committed_report() {
         }
         checked += 1;
     }
-    assert_eq!(checked, 11, "10 Table I experiments and creep-occluded");
+    assert_eq!(
+        checked, 12,
+        "10 Table I experiments, creep-occluded and creep-occluded+shield"
+    );
 }
 
 #[test]
 fn a_run_folder_is_named_after_its_experiment() {
     use crossroads_harness::train::default_out;
     for e in crossroads_harness::experiments::EXPERIMENTS {
-        let (actions, scenario) = e.name.split_once('-').expect("<actions>-<scenario>");
+        // A variant's run folder is its name too, from `--experiment`
+        // (`train::run`); the flags alone name the base experiment's.
+        let base = e.name.split_once('+').map_or(e.name, |(b, _)| b);
+        let (actions, scenario) = base.split_once('-').expect("<actions>-<scenario>");
         assert_eq!(
             default_out(scenario, actions),
-            std::path::Path::new("runs").join(e.name)
+            std::path::Path::new("runs").join(base)
         );
     }
     assert_eq!(

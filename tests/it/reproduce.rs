@@ -93,8 +93,8 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
         // The same weights behind the shield, with its counts.
         assert_shielded(&row["shielded"], "dqn:", row, 300);
-        // The shield alone: TTC at 0 s behind it.
-        assert_shielded(&row["shield_alone"], "ttc:0", row, 300);
+        // The shield alone: `go` behind it.
+        assert_shielded(&row["shield_alone"], "go", row, 300);
         // TTC's cell is the lowest threshold without collisions.
         assert_eq!(row["ttc"]["collision"].as_f64(), Some(0.0), "{row}");
         assert!(
@@ -109,7 +109,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
             assert_eq!(cell_trials(&row[method]), 300, "{method}: {row}");
         }
         assert_shielded(&row["shielded"], "dqn:", row, 300);
-        assert_shielded(&row["shield_alone"], "ttc-creep:0", row, 300);
+        assert_shielded(&row["shield_alone"], "go", row, 300);
         assert_ladder(row, 300);
     }
     let t3 = r["table3"].as_array().expect("table3");
@@ -122,7 +122,11 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         assert!(row.iter().all(|c| cell_trials(c) == 300), "{row:?}");
     }
     let runs = r["runs"].as_array().expect("runs");
-    assert_eq!(runs.len(), 7, "5 TTG, creep and TTG on occlusion: {runs:?}");
+    assert_eq!(
+        runs.len(),
+        8,
+        "5 TTG, creep, creep behind the shield and TTG on occlusion: {runs:?}"
+    );
 
     let md = std::fs::read_to_string(out.join("README.md")).expect("readme");
     assert!(md.contains("--quick smoke run"), "{md}");
@@ -150,7 +154,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         "the shield's cells have no paper value: {csv}"
     );
     let training = std::fs::read_to_string(out.join("training.csv")).expect("csv");
-    assert_eq!(training.lines().count(), 8, "{training}");
+    assert_eq!(training.lines().count(), 9, "{training}");
     // Safety across drivers: the networks too, bare and behind the shield.
     assert!(md.contains("(drivers/README.md)"), "{md}");
     let d: serde_json::Value = serde_json::from_str(
@@ -234,11 +238,15 @@ fn a_tiny_reproduction_of_table2_trains_evaluates_reports_and_reuses() {
             assert_eq!(cell_trials(&row[method]), 20, "{method}: {row}");
         }
         assert_shielded(&row["shielded"], "dqn:", row, 20);
-        assert_shielded(&row["shield_alone"], "ttc-creep:0", row, 20);
+        assert_shielded(&row["shield_alone"], "go", row, 20);
         assert_ladder(row, 20);
     }
     let runs = r["runs"].as_array().expect("runs");
-    assert_eq!(runs.len(), 2, "creep and TTG on occlusion: {runs:?}");
+    assert_eq!(
+        runs.len(),
+        3,
+        "creep, creep behind the shield and TTG on occlusion: {runs:?}"
+    );
     let md = std::fs::read_to_string(out.join("README.md")).expect("readme");
     assert!(md.contains("--quick smoke run"), "{md}");
     assert!(md.contains("| DQN-Creep + shield |"), "{md}");
@@ -251,7 +259,7 @@ fn a_tiny_reproduction_of_table2_trains_evaluates_reports_and_reuses() {
     let again = reproduce(&out, &tiny);
     let log2 = String::from_utf8_lossy(&again.stderr);
     assert!(again.status.success(), "{log2}");
-    assert_eq!(log2.matches("reusing").count(), 2, "{log2}");
+    assert_eq!(log2.matches("reusing").count(), 3, "{log2}");
     assert!(!log2.contains("training into"), "{log2}");
 }
 
@@ -395,7 +403,7 @@ fn baselines_only_measures_ttc_without_training_or_weights() {
 /// (with the shield's counts) and the oracle, on the row's trials; the
 /// oracle succeeds at least as often as the shield alone.
 fn assert_ladder(row: &serde_json::Value, trials: u64) {
-    assert_shielded(&row["see_through"], "ttc-creep:0", row, trials);
+    assert_shielded(&row["see_through"], "go", row, trials);
     let oracle = &row["oracle"];
     assert_eq!(cell_trials(oracle), trials, "{row}");
     assert!(

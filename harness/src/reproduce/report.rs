@@ -366,8 +366,10 @@ fn table2_md(w: &mut String, r: &Results, table: &Comparison) {
         w,
         "\nEach length is evaluated on its own family (`occluded-30`, `-60`, `-90`: walls on \
          the left, right or both, random width and offset); the DQNs are trained on all \
-         lengths together (`occluded`). TTC-with-creep thresholds (lowest without \
-         collisions): {}.\n",
+         lengths together (`occluded`); DQN-Creep + shield is a network trained behind the \
+         shield (`creep-occluded+shield`: a vetoed *go* executes as the shield's fallback \
+         and is stored at its value less a small cost), for use behind it only. \
+         TTC-with-creep thresholds (lowest without collisions): {}.\n",
         thresholds.join(", ")
     );
 }
@@ -491,12 +493,13 @@ fn ladder_md(w: &mut String, r: &Results) {
          behind the walls and goes when going reaches the goal in every one of 16 futures \
          of the present, else creeps to the creep limit and waits; the shield alone with \
          transparent walls (`--shield see_through=1`) is the shield knowing every car but \
-         not the future; the shield alone is what the ego's own view allows under the \
-         shield's assumptions. \"Below the oracle\" is the success in points under the \
-         oracle's.\n\n\
+         not the future; the shield alone (`--policy {} --actions creep --shield`) is what \
+         the ego's own view allows under the shield's assumptions. \"Below the oracle\" is \
+         the success in points under the oracle's.\n\n\
          | occlusion | policy | success % | collision % | time s | below the oracle |\n\
          | --- | --- | --- | --- | --- | --- |",
-        super::ORACLE
+        super::ORACLE,
+        super::SHIELD_ALONE
     );
     for row in &r.table2 {
         let Some(top) = row.oracle.as_ref() else {
@@ -586,12 +589,15 @@ fn shield_md(w: &mut String, r: &Results) {
          `crossroads eval --policy <run>/best --shield` on the same trials: every *go* the \
          network chooses is checked against the cars the ego senses and phantom cars where \
          its view ends, and vetoed when any could come too close (`sim::shield`). The \
-         shield alone is `--policy ttc:0 --shield` (`ttc-creep:0 --actions creep` on Table \
-         II): go whenever the shield lets the ego. \
+         shield alone is `--policy {} --shield`: a policy that always wants to go, so the \
+         ego goes at the first moment the shield allows and the shield's fallback (wait; \
+         creep to the creep limit on Table II) acts until then. On Table II the network is \
+         the one trained behind the shield. \
          Targets: no collision, at least the TTC column's success; on Table I also a mean \
          time at least 15 % below TTC's and within 5 % of the unshielded DQN's.\n\n\
          | row | collisions | success vs TTC | time / TTC's | time / DQN's | go vetoed |\n\
-         | --- | --- | --- | --- | --- | --- |"
+         | --- | --- | --- | --- | --- | --- |",
+        super::SHIELD_ALONE
     );
     let mark = |ok: bool| if ok { "✓" } else { "✗" };
     for (label, s, ttc, dqn) in rows {

@@ -56,7 +56,8 @@ pub struct TrainArgs {
     /// Wall-clock budget in minutes.
     #[arg(long, value_name = "MIN")]
     pub minutes: Option<f64>,
-    /// Run folder [default: runs/<actions>-<scenario>].
+    /// Run folder [default: runs/<experiment> with --experiment, else
+    /// runs/<actions>-<scenario>].
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Continue the run in the folder: its config.toml (unless --config),
@@ -86,14 +87,23 @@ impl TrainArgs {
         key_flag!(minutes => "train.max_minutes"),
     ];
 
+    /// The run folder: `--out`, else `runs/<experiment>` with
+    /// `--experiment`, else [`default_out`] of `scenario` and `actions`.
+    fn run_folder(&self, global: &GlobalArgs, scenario: &str, actions: &str) -> PathBuf {
+        match (&self.out, &global.experiment) {
+            (Some(out), _) => out.clone(),
+            (None, Some(e)) => PathBuf::from("runs").join(e),
+            (None, None) => default_out(scenario, actions),
+        }
+    }
+
     /// The run folder these flags name, before the config is read.
-    fn out_dir(&self) -> PathBuf {
-        self.out.clone().unwrap_or_else(|| {
-            default_out(
-                self.scenario.as_deref().unwrap_or("left"),
-                self.actions.as_deref().unwrap_or("ttg"),
-            )
-        })
+    fn out_dir(&self, global: &GlobalArgs) -> PathBuf {
+        self.run_folder(
+            global,
+            self.scenario.as_deref().unwrap_or("left"),
+            self.actions.as_deref().unwrap_or("ttg"),
+        )
     }
 
     /// The built-in experiment these flags name (default: ttg on left).
@@ -111,7 +121,7 @@ impl TrainArgs {
     /// `crossroads train` trains DQN-TTG on left with tuned settings.
     pub fn loader(&self, global: &GlobalArgs) -> ConfigLoader {
         let mut loader = global.loader();
-        let saved = self.out_dir().join("config.toml");
+        let saved = self.out_dir(global).join("config.toml");
         if self.resume && global.config.is_none() && saved.exists() {
             loader = loader.file(Some(saved));
         } else if global.config.is_none()
@@ -124,12 +134,10 @@ impl TrainArgs {
     }
 }
 
-/// Runs the training job.
-pub fn run(config: &Config, args: &TrainArgs) -> anyhow::Result<ExitCode> {
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| default_out(&config.sim.scenario, &config.sim.action_set));
+/// Runs the training job, into `--out`, else `runs/<experiment>` with
+/// `--experiment`, else `runs/<actions>-<scenario>` of the configuration.
+pub fn run(global: &GlobalArgs, config: &Config, args: &TrainArgs) -> anyhow::Result<ExitCode> {
+    let out = args.run_folder(global, &config.sim.scenario, &config.sim.action_set);
     let run = prepare::prepare(config, &out, args.resume)?;
     role::block_on(config, async move { session::train(run).await })
 }
