@@ -21,6 +21,16 @@ pub struct Experiment {
     pub toml: &'static str,
 }
 
+impl Experiment {
+    /// The experiment a variant varies (`creep-occluded` for
+    /// `creep-occluded+shield`); the name itself for any other.
+    pub fn base(&self) -> &'static str {
+        self.name
+            .split_once('+')
+            .map_or(self.name, |(base, _)| base)
+    }
+}
+
 macro_rules! experiments {
     ($($name:literal),* $(,)?) => {
         &[$(Experiment {

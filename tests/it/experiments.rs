@@ -168,7 +168,7 @@ fn a_run_folder_is_named_after_its_experiment() {
     for e in crossroads_harness::experiments::EXPERIMENTS {
         // A variant's run folder is its name too, from `--experiment`
         // (`train::run`); the flags alone name the base experiment's.
-        let base = e.name.split_once('+').map_or(e.name, |(b, _)| b);
+        let base = e.base();
         let (actions, scenario) = base.split_once('-').expect("<actions>-<scenario>");
         assert_eq!(
             default_out(scenario, actions),
