@@ -7,6 +7,8 @@
 //! the role's module in the binary then starts its crate's server or actor
 //! and waits for a signal.
 
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -48,15 +50,15 @@ impl Role {
         let shutdown = Shutdown::on_signals().context("installing signal handlers")?;
         let registry = registry(name)?;
         let endpoint = if config.telemetry.metrics {
-            Some(
-                MetricsServer::start(
-                    config.telemetry.metrics_addr,
-                    registry.clone(),
-                    shutdown.clone(),
-                )
-                .await
-                .context("starting the metrics endpoint")?,
+            let server = MetricsServer::start(
+                config.telemetry.metrics_addr,
+                registry.clone(),
+                shutdown.clone(),
             )
+            .await
+            .context("starting the metrics endpoint")?;
+            announce("metrics", server.local_addr())?;
+            Some(server)
         } else {
             None
         };
@@ -76,4 +78,30 @@ impl Role {
         }
         result
     }
+}
+
+/// The variable through which `crossroads train` asks a role it starts to
+/// announce what it bound: a path prefix, one file per address.
+pub const ANNOUNCE_VAR: &str = "CROSSROADS_ANNOUNCE";
+
+/// The file under `prefix` that announces the address of `what`
+/// (`metrics`, `listen`).
+pub fn announced_path(prefix: &Path, what: &str) -> PathBuf {
+    let mut path = prefix.as_os_str().to_owned();
+    path.push(format!(".{what}"));
+    PathBuf::from(path)
+}
+
+/// Writes `addr`, the address this role bound for `what`, where
+/// [`ANNOUNCE_VAR`] asks (nothing when it is unset): whole or not at all,
+/// through a temporary file renamed into place.
+pub fn announce(what: &str, addr: SocketAddr) -> anyhow::Result<()> {
+    let Some(prefix) = std::env::var_os(ANNOUNCE_VAR) else {
+        return Ok(());
+    };
+    let path = announced_path(Path::new(&prefix), what);
+    let tmp = announced_path(Path::new(&prefix), &format!("{what}.tmp"));
+    std::fs::write(&tmp, addr.to_string())
+        .with_context(|| format!("announcing {what} in {}", tmp.display()))?;
+    std::fs::rename(&tmp, &path).with_context(|| format!("announcing {what} in {}", path.display()))
 }

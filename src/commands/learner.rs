@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use crossroads_config::Config;
-use crossroads_harness::role::{Role, block_on};
+use crossroads_harness::role::{Role, announce, block_on};
 
 /// Trains until SIGINT/SIGTERM (or `learner.max_updates`), then writes the
 /// last checkpoint.
@@ -20,6 +20,7 @@ async fn serve(config: &Config) -> anyhow::Result<()> {
             crossroads_learner::start(config, Some(&role.registry), role.shutdown.clone())
                 .await
                 .context("starting the learner")?;
+        announce("listen", learner.local_addr())?;
         // The learner also stops alone (max_updates, an error); the
         // metrics endpoint follows it.
         learner.join().await.context("learner")

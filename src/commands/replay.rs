@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use crossroads_config::Config;
-use crossroads_harness::role::{Role, block_on};
+use crossroads_harness::role::{Role, announce, block_on};
 
 /// Serves the replay table until SIGINT/SIGTERM, then writes the last
 /// snapshot.
@@ -19,6 +19,7 @@ async fn serve(config: &Config) -> anyhow::Result<()> {
         let server = crossroads_replay::start(config, Some(&role.registry), role.shutdown.clone())
             .await
             .context("starting the replay server")?;
+        announce("listen", server.local_addr())?;
         server.join().await.context("replay server")
     }
     .await;

@@ -3,9 +3,13 @@
 //! group (so Ctrl-C reaches only `train`, which then stops them in order),
 //! each logging into its own file under the run folder and inheriting what
 //! every child of this program does (`crate::child`); the addresses they
-//! are given, and waiting until one answers.
+//! bind and announce, and waiting until one answers.
+//!
+//! Every role binds port 0 and announces the address it got in a file
+//! (`crate::role::announce`): a port picked here and bound there a moment
+//! later could be taken in between by any other program on the host.
 
-use std::net::{SocketAddr, TcpListener};
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -14,11 +18,25 @@ use anyhow::Context;
 use crossroads_common::Shutdown;
 use rustix::process::{Pid, Signal, kill_process};
 
-/// A free TCP port on loopback (bound, read, released; the role binds it
-/// again a moment later).
-pub fn free_port() -> anyhow::Result<SocketAddr> {
-    let l = TcpListener::bind("127.0.0.1:0").context("finding a free port")?;
-    l.local_addr().context("finding a free port")
+use crate::role::{ANNOUNCE_VAR, announced_path};
+
+/// What a role binds: port 0 on loopback, the kernel picks the port.
+const ANY_PORT: &str = "127.0.0.1:0";
+
+/// How long a role may take to bind what it announces.
+const ANNOUNCE_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// What every role of a session is started with.
+#[derive(Debug, Clone, Copy)]
+pub struct Launch<'a> {
+    /// This program.
+    pub exe: &'a Path,
+    /// The run's `config.toml`.
+    pub config: &'a Path,
+    /// The run's `logs` folder.
+    pub logs: &'a Path,
+    /// Whether roles serve metrics (`telemetry.metrics`).
+    pub metrics: bool,
 }
 
 /// One role process.
@@ -26,26 +44,47 @@ pub fn free_port() -> anyhow::Result<SocketAddr> {
 pub struct RoleChild {
     /// `replay`, `learner`, `actor-3`.
     pub name: String,
-    /// Its `/metrics` address.
-    pub metrics: SocketAddr,
+    /// Its `/metrics` address, once announced (none when
+    /// `telemetry.metrics` is off).
+    pub metrics: Option<SocketAddr>,
+    /// Whether it serves metrics (`telemetry.metrics`).
+    metrics_on: bool,
     /// Its log file.
     pub log: PathBuf,
+    /// Where it announces what it bound (`<logs>/<name>`, a suffix per
+    /// address).
+    announce: PathBuf,
     child: Child,
     exited: Option<ExitStatus>,
 }
 
 impl RoleChild {
-    /// Starts `exe --config config <args>` with `env` added, standard
-    /// output and error appended to `log`.
+    /// Starts `launch.exe --config launch.config <args>` with `env` added,
+    /// standard output and error appended to `<launch.logs>/<name>.log`,
+    /// its metrics on a port of its own choosing (`await_metrics` or
+    /// `metrics_now` learns which).
     pub fn spawn(
+        launch: &Launch<'_>,
         name: &str,
-        exe: &Path,
-        config: &Path,
         args: &[&str],
         env: &[(String, String)],
-        log: PathBuf,
-        metrics: SocketAddr,
     ) -> anyhow::Result<Self> {
+        let Launch {
+            exe,
+            config,
+            logs,
+            metrics,
+        } = *launch;
+        let log = logs.join(format!("{name}.log"));
+        let announce = logs.join(name);
+        for what in ["metrics", "listen"] {
+            let stale = announced_path(&announce, what);
+            match std::fs::remove_file(&stale) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e).with_context(|| format!("removing {}", stale.display())),
+            }
+        }
         let file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -58,7 +97,8 @@ impl RoleChild {
         cmd.arg("--config")
             .arg(config)
             .args(args)
-            .env("CROSSROADS_TELEMETRY__METRICS_ADDR", metrics.to_string())
+            .env("CROSSROADS_TELEMETRY__METRICS_ADDR", ANY_PORT)
+            .env(ANNOUNCE_VAR, &announce)
             .envs(env.iter().map(|(k, v)| (k, v)))
             .stdin(Stdio::null())
             .stdout(file)
@@ -69,13 +109,79 @@ impl RoleChild {
             .with_context(|| format!("starting {name} ({})", exe.display()))?;
         Ok(Self {
             name: name.to_owned(),
-            metrics,
+            metrics: None,
+            metrics_on: metrics,
             log,
+            announce,
             child,
             exited: None,
         })
     }
 
+    /// Waits until it announces its metrics port, when it serves metrics.
+    pub async fn await_metrics(&mut self, shutdown: &Shutdown) -> anyhow::Result<()> {
+        if self.metrics_on {
+            self.metrics = Some(self.announced("metrics", shutdown).await?);
+        }
+        Ok(())
+    }
+
+    /// Its metrics port if it has announced it by now (without waiting).
+    pub fn metrics_now(&mut self) -> Option<SocketAddr> {
+        if self.metrics.is_none() && self.metrics_on {
+            let path = announced_path(&self.announce, "metrics");
+            self.metrics = std::fs::read_to_string(path)
+                .ok()
+                .and_then(|text| text.trim().parse().ok());
+        }
+        self.metrics
+    }
+
+    /// The address it announces for `what` (`metrics`, `listen`), waiting
+    /// for it; fails when it exits first (with the end of its log), on a
+    /// signal, or after two minutes.
+    pub async fn announced(
+        &mut self,
+        what: &str,
+        shutdown: &Shutdown,
+    ) -> anyhow::Result<SocketAddr> {
+        let path = announced_path(&self.announce, what);
+        let start = Instant::now();
+        loop {
+            match std::fs::read_to_string(&path) {
+                Ok(text) => {
+                    return text.trim().parse().with_context(|| {
+                        format!(
+                            "{} announced {what} {text:?} in {}",
+                            self.name,
+                            path.display()
+                        )
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+            }
+            if let Some(status) = self.exited() {
+                anyhow::bail!(
+                    "{} exited ({status}) before it announced its {what} address; the end of {}:\n{}",
+                    self.name,
+                    self.log.display(),
+                    self.log_tail(20)
+                );
+            }
+            if start.elapsed() > ANNOUNCE_TIMEOUT {
+                anyhow::bail!(
+                    "{} did not announce its {what} address in {} within 2 minutes",
+                    self.name,
+                    path.display()
+                );
+            }
+            if shutdown.is_triggered() {
+                anyhow::bail!("stopped before {} started", self.name);
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
     /// How it exited, if it has.
     pub fn exited(&mut self) -> Option<ExitStatus> {
         if self.exited.is_none() {
@@ -121,20 +227,20 @@ impl Drop for RoleChild {
     }
 }
 
-/// The addresses of one session's roles.
+/// The addresses of one session's roles: the replay's and learner's are
+/// known once each has announced it.
 pub struct Addresses {
-    pub replay: SocketAddr,
-    pub learner: SocketAddr,
+    pub replay: Option<SocketAddr>,
+    pub learner: Option<SocketAddr>,
     pub shm_prefix: String,
     /// `https` when the run's servers speak TLS, else `http`.
     pub scheme: &'static str,
 }
 
 impl Addresses {
-    /// Free loopback ports for the replay and the learner, and iceoryx2
-    /// service names unique to this run folder and process; `scheme` is
-    /// the URLs' (`transport.tls`'s).
-    pub fn pick(out: &Path, scheme: &'static str) -> anyhow::Result<Self> {
+    /// iceoryx2 service names unique to this run folder and process;
+    /// `scheme` is the URLs' (`transport.tls`'s).
+    pub fn new(out: &Path, scheme: &'static str) -> Self {
         let name = out
             .file_name()
             .map_or("run".into(), |n| n.to_string_lossy().into_owned());
@@ -142,48 +248,52 @@ impl Addresses {
             .chars()
             .map(|ch| if ch.is_ascii_alphanumeric() { ch } else { '-' })
             .collect();
-        Ok(Self {
-            replay: free_port()?,
-            learner: free_port()?,
+        Self {
+            replay: None,
+            learner: None,
             shm_prefix: format!("crossroads/train-{name}-{}", std::process::id()),
             scheme,
-        })
+        }
     }
 
-    /// The replay's URL.
+    /// The replay's URL (empty before it is known).
     pub fn replay_url(&self) -> String {
-        format!("{}://{}", self.scheme, self.replay)
+        self.replay
+            .map_or_else(String::new, |a| format!("{}://{a}", self.scheme))
     }
 
-    /// The learner's URL.
+    /// The learner's URL (empty before it is known).
     pub fn learner_url(&self) -> String {
-        format!("{}://{}", self.scheme, self.learner)
+        self.learner
+            .map_or_else(String::new, |a| format!("{}://{a}", self.scheme))
     }
 
-    /// The variables every role gets (they override the file). Each role
-    /// is this binary, which sets libgomp's passive wait policy itself
-    /// (`main`), so the roles sharing these cores do not starve each other.
+    /// The variables the next role gets (they override the file): both
+    /// servers listen on a port of their own choosing, the clients reach
+    /// those known so far. Each role is this binary, which sets libgomp's
+    /// passive wait policy itself (`main`), so the roles sharing these
+    /// cores do not starve each other.
     pub fn env(&self) -> Vec<(String, String)> {
-        let mut env = Vec::new();
-        env.extend([
-            ("CROSSROADS_REPLAY__LISTEN".into(), self.replay.to_string()),
-            (
-                "CROSSROADS_TRANSPORT__REPLAY_ENDPOINT".into(),
-                self.replay_url(),
-            ),
-            (
-                "CROSSROADS_LEARNER__LISTEN".into(),
-                self.learner.to_string(),
-            ),
-            (
-                "CROSSROADS_TRANSPORT__LEARNER_ENDPOINT".into(),
-                self.learner_url(),
-            ),
+        let mut env = vec![
+            ("CROSSROADS_REPLAY__LISTEN".into(), ANY_PORT.into()),
+            ("CROSSROADS_LEARNER__LISTEN".into(), ANY_PORT.into()),
             (
                 "CROSSROADS_TRANSPORT__SHM_PREFIX".into(),
                 self.shm_prefix.clone(),
             ),
-        ]);
+        ];
+        if self.replay.is_some() {
+            env.push((
+                "CROSSROADS_TRANSPORT__REPLAY_ENDPOINT".into(),
+                self.replay_url(),
+            ));
+        }
+        if self.learner.is_some() {
+            env.push((
+                "CROSSROADS_TRANSPORT__LEARNER_ENDPOINT".into(),
+                self.learner_url(),
+            ));
+        }
         env
     }
 }

@@ -3,6 +3,7 @@
 //! final evaluation, the learner's last checkpoint, the replay's last
 //! snapshot), with the summary and the curve's picture written.
 
+use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -12,7 +13,7 @@ use crossroads_transport::{ClientSecurity, LearnerClient};
 use indicatif::ProgressBar;
 
 use super::prepare::Run;
-use super::procs::{Addresses, RoleChild, died, free_port, wait_ready};
+use super::procs::{Addresses, Launch, RoleChild, died, wait_ready};
 use super::record::{Curve, RunStatus, Summary, TrainMetrics, plot_curve};
 use crate::role;
 
@@ -78,21 +79,19 @@ pub async fn train(run: Run) -> anyhow::Result<()> {
 async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow::Result<()> {
     let exe = std::env::current_exe().context("finding this program")?;
     let config_path = run.out.join("config.toml");
-    let addr = Addresses::pick(&run.out, run.config.transport.tls.scheme())?;
-    let env = addr.env();
+    let mut addr = Addresses::new(&run.out, run.config.transport.tls.scheme());
     let logs = run.out.join("logs");
     let c = run.config.clone();
     let timeout = Duration::from_millis(c.transport.request_timeout_ms.min(10_000));
-
-    let mut replay = RoleChild::spawn(
-        "replay",
-        &exe,
-        &config_path,
-        &["replay"],
-        &env,
-        logs.join("replay.log"),
-        free_port()?,
-    )?;
+    let launch = Launch {
+        exe: &exe,
+        config: &config_path,
+        logs: &logs,
+        metrics: c.telemetry.metrics,
+    };
+    let mut replay = RoleChild::spawn(&launch, "replay", &["replay"], &addr.env())?;
+    replay.await_metrics(&shutdown).await?;
+    addr.replay = Some(replay.announced("listen", &shutdown).await?);
     let mut transport = c.transport.clone();
     transport.replay_endpoint = addr.replay_url();
     let security = ClientSecurity::load(&transport)?;
@@ -106,15 +105,21 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
     })
     .await?;
 
-    let mut learner = RoleChild::spawn(
-        "learner",
-        &exe,
-        &config_path,
-        &["learner"],
-        &env,
-        logs.join("learner.log"),
-        free_port()?,
-    )?;
+    let learner = async {
+        let mut learner = RoleChild::spawn(&launch, "learner", &["learner"], &addr.env())?;
+        learner.await_metrics(&shutdown).await?;
+        let listen = learner.announced("listen", &shutdown).await?;
+        Ok::<_, anyhow::Error>((learner, listen))
+    }
+    .await;
+    let (mut learner, listen) = match learner {
+        Ok(started) => started,
+        Err(e) => {
+            replay.stop(GRACE).await;
+            return Err(e);
+        }
+    };
+    addr.learner = Some(listen);
     let learner_client = LearnerClient::new(&addr.learner_url(), &security, timeout)?;
     let ready = wait_ready(&mut learner, &shutdown, true, || async {
         learner_client
@@ -131,24 +136,21 @@ async fn session(run: Run, metrics: TrainMetrics, shutdown: Shutdown) -> anyhow:
 
     let mut actors = Vec::new();
     for i in 0..c.actor.count {
-        let mut env = env.clone();
+        let mut env = addr.env();
         env.push(("CROSSROADS_ACTOR__INDEX".into(), i.to_string()));
-        actors.push(RoleChild::spawn(
-            &format!("actor-{i}"),
-            &exe,
-            &config_path,
-            &["actor"],
-            &env,
-            logs.join(format!("actor-{i}.log")),
-            free_port()?,
-        )?);
+        let name = format!("actor-{i}");
+        actors.push(RoleChild::spawn(&launch, &name, &["actor"], &env)?);
     }
+    // The actors' metrics ports are read as they announce them
+    // (`Session::actor_steps`), not awaited: the watch's first evaluation,
+    // of the weights the run starts from, comes before their first
+    // transitions.
+    let shown = |m: Option<SocketAddr>| m.map_or_else(|| "off".to_owned(), |a| a.to_string());
     tracing::info!(
-        replay = %addr.replay,
-        learner = %addr.learner,
-        replay_metrics = %replay.metrics,
-        learner_metrics = %learner.metrics,
-        actor_metrics = ?actors.iter().map(|a| a.metrics.to_string()).collect::<Vec<_>>(),
+        replay = %addr.replay_url(),
+        learner = %addr.learner_url(),
+        replay_metrics = %shown(replay.metrics),
+        learner_metrics = %shown(learner.metrics),
         logs = %logs.display(),
         "roles started"
     );
@@ -216,13 +218,18 @@ impl Session {
         Ok(false)
     }
 
-    /// Simulation steps of all actors, from their `/metrics`.
-    pub async fn actor_steps(&self) -> u64 {
+    /// Simulation steps of all actors, from their `/metrics`; logs their
+    /// addresses once every actor has announced its own.
+    pub async fn actor_steps(&mut self) -> u64 {
+        let known = self.actors.iter().all(|a| a.metrics.is_some());
+        let addrs: Vec<Option<SocketAddr>> =
+            self.actors.iter_mut().map(RoleChild::metrics_now).collect();
+        if !known && addrs.iter().all(Option::is_some) && self.run.config.telemetry.metrics {
+            tracing::info!(actor_metrics = ?addrs.iter().flatten().collect::<Vec<_>>(), "actors' metrics");
+        }
         let mut total = 0.0;
-        for a in &self.actors {
-            if let Ok(text) =
-                crossroads_common::metrics::scrape(a.metrics, Duration::from_secs(2)).await
-            {
+        for a in addrs.into_iter().flatten() {
+            if let Ok(text) = crossroads_common::metrics::scrape(a, Duration::from_secs(2)).await {
                 total += sum_metric(&text, "crossroads_actor_env_steps_total");
             }
         }
