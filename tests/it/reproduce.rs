@@ -91,7 +91,8 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     assert_eq!(t1.len(), 5, "{t1:?}");
     for row in t1 {
         assert_eq!(cell_trials(&row["ttg"]), 300, "{row}");
-        // The same weights behind the shield, with its counts.
+        // The network trained behind the shield (ttg-<s>+shield), behind
+        // it, with its counts.
         assert_shielded(&row["shielded"], "dqn:", row, 300);
         // The shield alone: `go` behind it.
         assert_shielded(&row["shield_alone"], "go", row, 300);
@@ -124,8 +125,9 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     let runs = r["runs"].as_array().expect("runs");
     assert_eq!(
         runs.len(),
-        8,
-        "5 TTG, creep, creep behind the shield and TTG on occlusion: {runs:?}"
+        13,
+        "5 TTG, 5 TTG behind the shield, creep, creep behind the shield and TTG on \
+         occlusion: {runs:?}"
     );
 
     let md = std::fs::read_to_string(out.join("README.md")).expect("readme");
@@ -154,7 +156,7 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
         "the shield's cells have no paper value: {csv}"
     );
     let training = std::fs::read_to_string(out.join("training.csv")).expect("csv");
-    assert_eq!(training.lines().count(), 9, "{training}");
+    assert_eq!(training.lines().count(), 14, "{training}");
     // Safety across drivers: the networks too, bare and behind the shield.
     assert!(md.contains("(drivers/README.md)"), "{md}");
     let d: serde_json::Value = serde_json::from_str(
@@ -172,7 +174,11 @@ fn quick_reproduction_writes_every_table_and_figure_and_reuses_its_runs() {
     let again = reproduce(&out, &["--only", "table1"]);
     let log2 = String::from_utf8_lossy(&again.stderr);
     assert!(again.status.success(), "{log2}");
-    assert_eq!(log2.matches("reusing").count(), 5, "{log2}");
+    assert_eq!(
+        log2.matches("reusing").count(),
+        10,
+        "5 TTG and 5 TTG behind the shield: {log2}"
+    );
     assert!(!log2.contains("training into"), "{log2}");
 
     // A full reproduction into a quick report folder is refused.

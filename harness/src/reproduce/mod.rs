@@ -205,6 +205,11 @@ impl Plan {
             paper::SCENARIOS
                 .iter()
                 .for_each(|s| add(format!("ttg-{s}")));
+            if table1 {
+                paper::SCENARIOS
+                    .iter()
+                    .for_each(|s| add(format!("ttg-{s}+shield")));
+            }
         } else if fig3 {
             paper::FIG3_SCENARIOS
                 .iter()
@@ -645,7 +650,7 @@ fn evaluate_all(plan: &Plan, r: &mut Results, shutdown: &Shutdown) -> anyhow::Re
                     None
                 },
                 ttg: dqn(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
-                shielded: shielded(&format!("ttg-{s}"), s, ActionSet::Ttg)?,
+                shielded: shielded(&format!("ttg-{s}+shield"), s, ActionSet::Ttg)?,
                 shield_alone: shield_alone(s, ActionSet::Ttg)?,
             });
         }
