@@ -129,12 +129,26 @@ impl RoleChild {
     /// Its metrics port if it has announced it by now (without waiting).
     pub fn metrics_now(&mut self) -> Option<SocketAddr> {
         if self.metrics.is_none() && self.metrics_on {
-            let path = announced_path(&self.announce, "metrics");
-            self.metrics = std::fs::read_to_string(path)
-                .ok()
-                .and_then(|text| text.trim().parse().ok());
+            self.metrics = self.read_announced("metrics").ok().flatten();
         }
         self.metrics
+    }
+
+    /// The address it has announced for `what` (`metrics`, `listen`), if
+    /// it has.
+    fn read_announced(&self, what: &str) -> anyhow::Result<Option<SocketAddr>> {
+        let path = announced_path(&self.announce, what);
+        match std::fs::read_to_string(&path) {
+            Ok(text) => text.trim().parse().map(Some).with_context(|| {
+                format!(
+                    "{} announced {what} {text:?} in {}",
+                    self.name,
+                    path.display()
+                )
+            }),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e).with_context(|| format!("reading {}", path.display())),
+        }
     }
 
     /// The address it announces for `what` (`metrics`, `listen`), waiting
@@ -145,21 +159,10 @@ impl RoleChild {
         what: &str,
         shutdown: &Shutdown,
     ) -> anyhow::Result<SocketAddr> {
-        let path = announced_path(&self.announce, what);
         let start = Instant::now();
         loop {
-            match std::fs::read_to_string(&path) {
-                Ok(text) => {
-                    return text.trim().parse().with_context(|| {
-                        format!(
-                            "{} announced {what} {text:?} in {}",
-                            self.name,
-                            path.display()
-                        )
-                    });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+            if let Some(addr) = self.read_announced(what)? {
+                return Ok(addr);
             }
             if let Some(status) = self.exited() {
                 anyhow::bail!(
@@ -173,7 +176,7 @@ impl RoleChild {
                 anyhow::bail!(
                     "{} did not announce its {what} address in {} within 2 minutes",
                     self.name,
-                    path.display()
+                    announced_path(&self.announce, what).display()
                 );
             }
             if shutdown.is_triggered() {
@@ -182,6 +185,7 @@ impl RoleChild {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     }
+
     /// How it exited, if it has.
     pub fn exited(&mut self) -> Option<ExitStatus> {
         if self.exited.is_none() {

@@ -224,7 +224,7 @@ impl Session {
         let known = self.actors.iter().all(|a| a.metrics.is_some());
         let addrs: Vec<Option<SocketAddr>> =
             self.actors.iter_mut().map(RoleChild::metrics_now).collect();
-        if !known && addrs.iter().all(Option::is_some) && self.run.config.telemetry.metrics {
+        if !known && addrs.iter().all(Option::is_some) {
             tracing::info!(actor_metrics = ?addrs.iter().flatten().collect::<Vec<_>>(), "actors' metrics");
         }
         let mut total = 0.0;
